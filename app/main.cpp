@@ -1,1 +1,145 @@
-int main() { return 0; }
+// polycube command-line tool: a thin layer over the library (src/polycube/pipeline).
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <iostream>
+
+#include "polycube/core/error.h"
+#include "polycube/examples/examples.h"
+#include "polycube/pipeline/pipeline.h"
+
+using namespace polycube;
+
+namespace {
+
+// A one-line progress bar on stderr, drawn only when stderr is a terminal.
+struct ProgressBar {
+  bool enabled = false;
+  std::string stage;
+  void update(const std::string& s, double f) {
+    if (!enabled) return;
+    const int width = 30;
+    int n = static_cast<int>(f * width + 0.5);
+    std::fprintf(stderr, "\r%-8s [%s%s] %3d%%", s.c_str(), std::string(n, '#').c_str(),
+                 std::string(width - n, ' ').c_str(), static_cast<int>(f * 100 + 0.5));
+    if (f >= 1) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+  }
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "polycube: l1-based polycube maps of 3D shapes and hex/quad remeshing.\n"
+      "Reads a closed triangle surface (OBJ, OFF, STL, PLY), a tet or hex mesh (MEDIT .mesh, VTK, Gmsh .msh)\n"
+      "or a CAD model (STEP, IGES, BREP), validates it, tetrahedralizes it and writes the results and\n"
+      "report.json into the output folder. Lengths are relative to the input's bounding-box diagonal.\n"
+      "Exit codes: 0 ok, 2 usage, 3 unreadable input, 4 invalid mesh, 5 tetrahedralization failed,\n"
+      "6 output not writable, 70 internal error."};
+  app.set_version_flag("--version", POLYCUBE_VERSION);
+
+  PipelineOptions opt;
+  std::string until = to_string(last_available_stage());
+  std::string out_dir;
+  bool quiet = false, verbose = false;
+  app.add_option("input", opt.input, "Input mesh or CAD file");
+  app.add_option("-o,--output", out_dir, "Output folder (default: out/<input name>)");
+  app.add_option("--example", opt.example, "Run on a built-in example instead of a file; 'list' lists them");
+  app.add_option("--example-size", opt.example_mesh_size,
+                 "Surface edge length of the built-in examples, fraction of the bbox diagonal")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-3, 0.5));
+  app.add_option("--until", until, "Stop after this stage: load, tet (later: deform, polycube, hex, quad)")
+      ->capture_default_str();
+  app.add_option("--edge-length", opt.tet.edge_length,
+                 "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
+                 "diagonal (0 = keep the input triangles)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 0.5));
+  app.add_option("--max-size", opt.tet.max_size,
+                 "Largest tet edge inside the volume, fraction of the bbox diagonal (0 = grow from the boundary)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--tets", opt.tet.target_tets,
+                 "Approximate number of tets (sets the interior size; the kept input surface sets a minimum); 0 = off")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 100000000));
+  app.add_option("--tet-algorithm", opt.tet.algorithm, "Gmsh 3D algorithm: delaunay or hxt (parallel)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"delaunay", "hxt"}));
+  app.add_option("--cad-size", opt.cad.mesh_size,
+                 "Surface edge length for CAD input (STEP/IGES/BREP), fraction of the bbox diagonal")
+      ->capture_default_str()
+      ->check(CLI::Range(1e-4, 0.5));
+  app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
+  app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
+  app.add_flag("-v,--verbose", verbose, "Debug messages");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+
+  auto logger = spdlog::stderr_color_mt("polycube");
+  logger->set_pattern("%^[%l]%$ %v");
+  logger->set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);
+
+  if (opt.example == "list") {
+    for (const auto& e : examples::list()) std::printf("%-16s %s\n", e.name.c_str(), e.description.c_str());
+    return 0;
+  }
+  if (!opt.example.empty() && !opt.input.empty()) {
+    logger->error("give either an input file or --example, not both");
+    return 2;
+  }
+  if (opt.example.empty() && opt.input.empty()) {
+    logger->error("no input: give an input file or --example NAME (see --help)");
+    return 2;
+  }
+
+  ProgressBar bar;
+  bar.enabled = !quiet && isatty(fileno(stderr));
+  Hooks hooks;
+  hooks.log = [&](LogLevel l, const std::string& m) {
+    if (bar.enabled) std::fprintf(stderr, "\r\033[K");
+    switch (l) {
+      case LogLevel::Debug: logger->debug(m); break;
+      case LogLevel::Info: logger->info(m); break;
+      case LogLevel::Warn: logger->warn(m); break;
+    }
+  };
+  hooks.progress = [&](const std::string& s, double f) { bar.update(s, f); };
+
+  try {
+    opt.until = parse_stage(until);
+    if (out_dir.empty()) {
+      std::string stem = opt.example;
+      if (stem.empty()) {
+        stem = opt.input;
+        size_t sl = stem.find_last_of("/\\");
+        if (sl != std::string::npos) stem = stem.substr(sl + 1);
+        size_t dot = stem.find_last_of('.');
+        if (dot != std::string::npos && dot > 0) stem = stem.substr(0, dot);
+      }
+      out_dir = "out/" + stem;
+    }
+    opt.out_dir = out_dir;
+    auto report = run_pipeline(opt, hooks);
+    logger->info("done in {:.2f} s; results in {}/ (report.json)", report["timings"]["total"].get<double>(), out_dir);
+    return 0;
+  } catch (const Error& e) {
+    logger->error("{}", e.what());
+    return exit_code(e.kind());
+  } catch (const std::bad_alloc&) {
+    logger->error("out of memory");
+    return 70;
+  } catch (const std::exception& e) {
+    logger->error("internal error: {}", e.what());
+    return 70;
+  }
+}

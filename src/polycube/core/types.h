@@ -31,6 +31,7 @@
 // Polycube chart label code (used from the polycube stage on): 0..5 = +X, -X, +Y, -Y, +Z, -Z.
 #pragma once
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <cstdint>
 #include <string>
 #include <vector>

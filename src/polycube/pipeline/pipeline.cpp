@@ -1,0 +1,295 @@
+#include "polycube/pipeline/pipeline.h"
+
+#include <algorithm>
+#include <array>
+#include <filesystem>
+#include <map>
+#include <fstream>
+
+#include "polycube/core/error.h"
+#include "polycube/examples/examples.h"
+#include "polycube/io/writers.h"
+#include "polycube/validate/tetmesh.h"
+
+namespace polycube {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+const char* to_string(Stage s) {
+  switch (s) {
+    case Stage::Load: return "load";
+    case Stage::Tet: return "tet";
+    case Stage::Deform: return "deform";
+    case Stage::Polycube: return "polycube";
+    case Stage::Hex: return "hex";
+    case Stage::Quad: return "quad";
+  }
+  return "?";
+}
+
+Stage last_available_stage() { return Stage::Tet; }
+
+Stage parse_stage(const std::string& name) {
+  for (Stage s : {Stage::Load, Stage::Tet, Stage::Deform, Stage::Polycube, Stage::Hex, Stage::Quad})
+    if (name == to_string(s)) {
+      if (static_cast<int>(s) > static_cast<int>(last_available_stage()))
+        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet)");
+      return s;
+    }
+  throw Error(ErrorKind::Usage, "unknown stage '" + name + "' (stages: load, tet, deform, polycube, hex, quad)");
+}
+
+const std::vector<std::string>& output_files() {
+  static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk"};
+  return f;
+}
+
+namespace {
+
+void write_json(const fs::path& p, const json& j) {
+  std::ofstream o(p);
+  if (!o) throw Error(ErrorKind::Output, p.string() + ": cannot open for writing");
+  o << j.dump(2) << "\n";
+  o.close();
+  if (!o) throw Error(ErrorKind::Output, p.string() + ": write failed");
+}
+
+json bbox_json(const MatX3d& V) {
+  Vec3 lo = V.colwise().minCoeff(), hi = V.colwise().maxCoeff();
+  return {{"min", {lo.x(), lo.y(), lo.z()}}, {"max", {hi.x(), hi.y(), hi.z()}}, {"diagonal", (hi - lo).norm()}};
+}
+
+// Boundary quads of hexes (outward for the convention of types.h), split into triangles.
+MeshData hex_boundary_surface(const MeshData& m) {
+  static const int q[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+  std::map<std::array<int, 4>, std::pair<std::array<int, 4>, int>> faces;
+  for (int h = 0; h < m.H.rows(); ++h)
+    for (auto& f : q) {
+      std::array<int, 4> v{m.H(h, f[0]), m.H(h, f[1]), m.H(h, f[2]), m.H(h, f[3])}, k = v;
+      std::sort(k.begin(), k.end());
+      auto it = faces.find(k);
+      if (it == faces.end()) faces.emplace(k, std::make_pair(v, 1));
+      else it->second.second++;
+    }
+  std::vector<int> tri;
+  for (auto& [k, vc] : faces) {
+    if (vc.second > 2)
+      throw Error(ErrorKind::InvalidMesh, m.path + ": a hex face is shared by " + std::to_string(vc.second) + " hexes");
+    if (vc.second == 1) {
+      auto& v = vc.first;
+      tri.insert(tri.end(), {v[0], v[1], v[2], v[0], v[2], v[3]});
+    }
+  }
+  MatX3i F(static_cast<Eigen::Index>(tri.size() / 3), 3);
+  for (size_t i = 0; i < tri.size(); ++i) F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = tri[i];
+  MeshData s = make_mesh_data(m.V, F, m.format);
+  s.path = m.path;
+  return s;
+}
+
+json surface_json(const SurfaceReport& r) {
+  return {{"vertices", r.vertices},
+          {"triangles", r.triangles},
+          {"components", r.components},
+          {"genus", r.genus},
+          {"closed", r.closed},
+          {"repaired", r.repaired()},
+          {"repairs",
+           {{"faces_flipped", r.faces_flipped},
+            {"components_reversed", r.components_reversed},
+            {"unreferenced_vertices_removed", r.unreferenced_removed},
+            {"stl_vertices_welded", r.welded_vertices}}}};
+}
+
+json tet_json(const TetMesh& tm, const TetQuality& q) {
+  return {{"vertices", tm.V.rows()},
+          {"tets", tm.T.rows()},
+          {"boundary_triangles", tm.boundary.rows()},
+          {"inverted", q.inverted},
+          {"zero_volume", q.zero_volume},
+          {"min_dihedral_deg", q.min_dihedral_deg},
+          {"max_dihedral_deg", q.max_dihedral_deg}};
+}
+
+}  // namespace
+
+json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
+  Stopwatch total;
+  json report;
+  report["tool"] = {{"name", "polycube"}, {"version", POLYCUBE_VERSION}};
+  report["status"] = "running";
+  report["timings"] = json::object();
+  const fs::path out(opt.out_dir);
+  const fs::path staging = out / ".staging";
+
+  // Prepare the output folder: nothing from an earlier run may pass for this run's result.
+  {
+    std::error_code ec;
+    fs::create_directories(out, ec);
+    if (ec || !fs::is_directory(out))
+      throw Error(ErrorKind::Output, opt.out_dir + ": cannot create output folder (" + ec.message() + ")");
+    for (const auto& f : output_files()) fs::remove(out / f, ec);
+    fs::remove_all(staging, ec);
+    fs::create_directories(staging, ec);
+    if (ec) throw Error(ErrorKind::Output, staging.string() + ": cannot create (" + ec.message() + ")");
+  }
+  std::vector<std::string> written;
+  auto stage_path = [&](const std::string& name) {
+    written.push_back(name);
+    return (staging / name).string();
+  };
+  auto write_mesh = [&](const std::string& stem, const MeshData& m) {
+    io::write_medit(stage_path(stem + ".mesh"), m);
+    io::write_vtk(stage_path(stem + ".vtk"), m, opt.vtk_binary);
+  };
+
+  try {
+    // ---- load ---------------------------------------------------------------------------
+    Stopwatch sw;
+    hooks.report("load", 0);
+    MeshData in;
+    if (!opt.example.empty()) {
+      hooks.info("building example '" + opt.example + "'");
+      in = examples::make(opt.example, opt.example_mesh_size);
+    } else {
+      if (opt.input.empty()) throw Error(ErrorKind::Usage, "no input file given (or use --example NAME)");
+      hooks.info("reading " + opt.input);
+      in = io::read_mesh(opt.input, opt.cad);
+    }
+    report["input"] = {{"path", opt.input}, {"format", in.format}};
+    if (!opt.example.empty()) report["input"]["example"] = opt.example;
+    if (in.T.rows() > 0 && in.H.rows() > 0)
+      throw Error(ErrorKind::InvalidMesh, in.path + ": mixed tetrahedral and hexahedral meshes are not supported");
+
+    SurfaceMesh surface;
+    SurfaceLayout layout;
+    TetMesh tm;
+    bool have_tets = false;
+    if (in.T.rows() > 0) {
+      // Tet mesh input: checked, its boundary validated like a surface input.
+      report["input"]["kind"] = "tet";
+      TetInputReport tr;
+      tm = prepare_tet_input(in, tr);
+      std::vector<int> map(tm.V.rows(), -1), back;
+      MatX3i BF = tm.boundary;
+      for (int f = 0; f < BF.rows(); ++f)
+        for (int k = 0; k < 3; ++k) {
+          int& v = BF(f, k);
+          if (map[v] < 0) {
+            map[v] = static_cast<int>(back.size());
+            back.push_back(v);
+          }
+          v = map[v];
+        }
+      MatX3d BV(back.size(), 3);
+      for (size_t i = 0; i < back.size(); ++i) BV.row(static_cast<Eigen::Index>(i)) = tm.V.row(back[i]);
+      MeshData bm = make_mesh_data(BV, BF, in.format);
+      bm.path = in.path.empty() ? "input" : in.path + " (boundary of the tet mesh)";
+      ValidateOptions vo = opt.validate;
+      SurfaceReport sr = validate_surface(bm, layout, vo);
+      report["input"].update(surface_json(sr));
+      report["input"]["vertices"] = tm.V.rows();
+      report["input"]["tets"] = tm.T.rows();
+      report["input"]["repairs"]["unreferenced_vertices_removed"] = tr.unreferenced_removed;
+      report["input"]["repairs"]["tets_reoriented"] = tr.tets_reoriented;
+      if (tr.tets_reoriented) report["input"]["repaired"] = true;
+      surface.V = bm.V;
+      surface.F = bm.F;
+      have_tets = true;
+    } else {
+      MeshData s = in.H.rows() > 0 ? hex_boundary_surface(in) : in;
+      report["input"]["kind"] = in.H.rows() > 0 ? "hex" : "surface";
+      if (in.H.rows() > 0) report["input"]["hexes"] = in.H.rows();
+      SurfaceReport sr = validate_surface(s, layout, opt.validate);
+      report["input"].update(surface_json(sr));
+      if (sr.repaired())
+        hooks.warn("input repaired: " + std::to_string(sr.faces_flipped) + " faces flipped, " +
+                   std::to_string(sr.components_reversed) + " components reversed, " +
+                   std::to_string(sr.unreferenced_removed) + " unreferenced vertices removed");
+      surface.V = s.V;
+      surface.F = s.F;
+    }
+    report["input"]["bbox"] = bbox_json(surface.V);
+    hooks.info("input: " + std::to_string(surface.V.rows()) + " vertices, " + std::to_string(surface.F.rows()) +
+               " triangles, " + std::to_string(layout.num_components()) + " component(s), genus " +
+               report["input"]["genus"].dump());
+    write_mesh("surface", make_mesh_data(surface.V, surface.F));
+    report["timings"]["load"] = sw.seconds();
+    hooks.report("load", 1);
+
+    // ---- tet ----------------------------------------------------------------------------
+    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Tet)) {
+      Stopwatch st;
+      hooks.report("tet", 0);
+      json tj;
+      if (have_tets) {
+        check_tet_mesh(tm, nullptr, in.path);
+        tj = tet_json(tm, measure_tets(tm.V, tm.T));
+        tj["source"] = "input";
+      } else {
+        SurfaceMesh used = surface;
+        SurfaceLayout used_layout = layout;
+        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
+        double el = opt.tet.edge_length * diag;
+        if (el > 0) {
+          hooks.info("remeshing the surface to edge length " + std::to_string(el));
+          used = remesh_surface(surface, layout, el);
+          MeshData rm = make_mesh_data(used.V, used.F, "remeshed");
+          rm.path = "remeshed surface";
+          validate_surface(rm, used_layout, opt.validate);
+          used.V = rm.V;
+          used.F = rm.F;
+        }
+        TetStats stats;
+        hooks.info("tetrahedralizing (" + opt.tet.algorithm + ")");
+        tm = tetrahedralize(used, used_layout, opt.tet, hooks, &stats);
+        tj = tet_json(tm, stats.quality);
+        tj["source"] = "gmsh-" + opt.tet.algorithm;
+        tj["remeshed"] = el > 0;
+        tj["surface_vertices"] = stats.surface_vertices;
+        tj["gmsh_runs"] = stats.attempts;
+      }
+      report["tetmesh"] = tj;
+      MeshData out_m;
+      out_m.V = tm.V;
+      out_m.T = tm.T;
+      out_m.F = tm.boundary;
+      write_mesh("tetmesh", out_m);
+      report["timings"]["tet"] = st.seconds();
+      hooks.info("tet mesh: " + std::to_string(tm.V.rows()) + " vertices, " + std::to_string(tm.T.rows()) +
+                 " tets, min dihedral " + std::to_string(tj["min_dihedral_deg"].get<double>()) + " deg");
+      hooks.report("tet", 1);
+    }
+
+    // ---- publish ------------------------------------------------------------------------
+    report["status"] = "ok";
+    report["stopped_after"] = to_string(opt.until);
+    report["timings"]["total"] = total.seconds();
+    report["outputs"] = written;
+    for (const auto& f : written) {
+      std::error_code ec;
+      fs::rename(staging / f, out / f, ec);
+      if (ec) throw Error(ErrorKind::Output, (out / f).string() + ": cannot move into place (" + ec.message() + ")");
+    }
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    write_json(out / "report.json", report);
+    return report;
+  } catch (const Error& e) {
+    std::error_code ec;
+    for (const auto& f : written) fs::remove(out / f, ec);
+    fs::remove_all(staging, ec);
+    report["status"] = "error";
+    report["error"] = {{"kind", to_string(e.kind())}, {"message", e.what()}, {"exit_code", exit_code(e.kind())}};
+    report["timings"]["total"] = total.seconds();
+    report.erase("outputs");
+    try {
+      write_json(out / "report.json", report);
+    } catch (...) {
+    }
+    throw;
+  }
+}
+
+}  // namespace polycube

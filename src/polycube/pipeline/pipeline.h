@@ -1,0 +1,46 @@
+// The whole job: load and validate an input, tetrahedralize it, (later: deform into a polycube,
+// extract the polycube, hex/quad remeshing), write the outputs and report.json.
+//
+// Output protocol: files are written to OUTDIR/.staging and moved into OUTDIR only when every
+// stage asked for has succeeded; outputs of an earlier run are removed first. On failure OUTDIR
+// holds only report.json with "status": "error" and the message.
+#pragma once
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "polycube/core/log.h"
+#include "polycube/io/readers.h"
+#include "polycube/tetra/tetrahedralize.h"
+#include "polycube/validate/surface.h"
+
+namespace polycube {
+
+/// Pipeline stages, in order. Only those marked available run today.
+enum class Stage { Load, Tet, Deform, Polycube, Hex, Quad };
+
+/// "load", "tet", ... / parse (throws Error(Usage) listing the names).
+const char* to_string(Stage s);
+Stage parse_stage(const std::string& name);
+/// Last stage implemented so far.
+Stage last_available_stage();
+
+struct PipelineOptions {
+  std::string input;           ///< input file; empty when `example` is set
+  std::string example;         ///< built-in example name (see examples::list())
+  double example_mesh_size = 0.04;  ///< example surface edge length, fraction of the bbox diagonal
+  std::string out_dir = "out";  ///< output folder, created if missing
+  Stage until = Stage::Tet;    ///< stop after this stage
+  bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
+  io::CadOptions cad;
+  ValidateOptions validate;
+  TetOptions tet;
+};
+
+/// Names of every file the pipeline may write into the output folder.
+const std::vector<std::string>& output_files();
+
+/// Runs the pipeline and returns the report (also written to OUTDIR/report.json).
+/// Throws polycube::Error after writing the error report.
+nlohmann::json run_pipeline(const PipelineOptions& opt, const Hooks& hooks = {});
+
+}  // namespace polycube

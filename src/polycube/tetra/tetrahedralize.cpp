@@ -1,0 +1,264 @@
+#include "polycube/tetra/tetrahedralize.h"
+
+#include <gmsh.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <sstream>
+#include <unordered_map>
+
+#include "polycube/core/error.h"
+#include "polycube/io/gmsh_session.h"
+#include "polycube/validate/intersections.h"
+
+namespace polycube {
+
+namespace {
+
+double bbox_diagonal(const MatX3d& V) {
+  if (V.rows() == 0) return 0;
+  return (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
+}
+
+std::vector<std::vector<int>> faces_by_component(const SurfaceLayout& layout) {
+  std::vector<std::vector<int>> cf(layout.num_components());
+  for (size_t f = 0; f < layout.component_of_face.size(); ++f) cf[layout.component_of_face[f]].push_back(static_cast<int>(f));
+  return cf;
+}
+
+// Adds one discrete surface per component, holding its nodes (tag = vertex index + 1) and triangles.
+std::vector<int> add_surfaces(const SurfaceMesh& s, const std::vector<std::vector<int>>& cf) {
+  std::vector<int> vcomp(s.V.rows(), -1);
+  for (size_t c = 0; c < cf.size(); ++c)
+    for (int f : cf[c])
+      for (int k = 0; k < 3; ++k) vcomp[s.F(f, k)] = static_cast<int>(c);
+  std::vector<int> ent(cf.size());
+  for (size_t c = 0; c < cf.size(); ++c) {
+    ent[c] = gmsh::model::addDiscreteEntity(2);
+    std::vector<std::size_t> tags;
+    std::vector<double> xyz;
+    for (int v = 0; v < s.V.rows(); ++v)
+      if (vcomp[v] == static_cast<int>(c)) {
+        tags.push_back(v + 1);
+        xyz.insert(xyz.end(), {s.V(v, 0), s.V(v, 1), s.V(v, 2)});
+      }
+    gmsh::model::mesh::addNodes(2, ent[c], tags, xyz);
+    std::vector<std::size_t> tri;
+    tri.reserve(3 * cf[c].size());
+    for (int f : cf[c])
+      for (int k = 0; k < 3; ++k) tri.push_back(s.F(f, k) + 1);
+    gmsh::model::mesh::addElementsByType(ent[c], 2, {}, tri);
+  }
+  return ent;
+}
+
+[[noreturn]] void mesher_failed(const SurfaceMesh& s, const std::string& gmsh_message) {
+  auto pairs = find_self_intersections(s.V, s.F, 10);
+  std::ostringstream os;
+  if (!pairs.empty()) {
+    os << "the surface intersects itself (the tet mesher reports: " << gmsh_message << "); intersecting face pairs:";
+    for (auto [a, b] : pairs) {
+      Vec3 c = (s.V.row(s.F(a, 0)) + s.V.row(s.F(a, 1)) + s.V.row(s.F(a, 2))).transpose() / 3;
+      os << "\n  faces " << a << " and " << b << " (near " << c.x() << ", " << c.y() << ", " << c.z() << ")";
+    }
+    throw Error(ErrorKind::InvalidMesh, os.str());
+  }
+  throw Error(ErrorKind::Tetrahedralization, "tetrahedralization failed: " + gmsh_message);
+}
+
+}  // namespace
+
+void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::string& name) {
+  TetQuality q = measure_tets(tm.V, tm.T);
+  if (q.inverted || q.zero_volume) {
+    std::ostringstream os;
+    os << name << ": " << q.inverted << " inverted and " << q.zero_volume << " zero-volume tets, e.g. tets";
+    for (int t : q.bad) os << " " << t;
+    throw Error(ErrorKind::Tetrahedralization, os.str());
+  }
+  if (!surface) return;
+  const MatX3i B = tet_boundary(tm.T, name);
+  auto canon = [](int a, int b, int c) {  // rotation-invariant, orientation-preserving key
+    std::array<int, 3> k{a, b, c};
+    std::rotate(k.begin(), std::min_element(k.begin(), k.end()), k.end());
+    return k;
+  };
+  std::vector<std::array<int, 3>> want, got;
+  for (int f = 0; f < surface->F.rows(); ++f) want.push_back(canon(surface->F(f, 0), surface->F(f, 1), surface->F(f, 2)));
+  for (int f = 0; f < B.rows(); ++f) got.push_back(canon(B(f, 0), B(f, 1), B(f, 2)));
+  std::sort(want.begin(), want.end());
+  std::sort(got.begin(), got.end());
+  if (want != got) {
+    std::vector<std::array<int, 3>> missing, extra;
+    std::set_difference(want.begin(), want.end(), got.begin(), got.end(), std::back_inserter(missing));
+    std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
+    std::ostringstream os;
+    os << name << ": the tet mesh boundary differs from the input surface: " << missing.size()
+       << " input triangles missing, " << extra.size() << " extra boundary triangles";
+    if (!missing.empty())
+      os << " (e.g. missing triangle " << missing[0][0] << " " << missing[0][1] << " " << missing[0][2] << ")";
+    throw Error(ErrorKind::Tetrahedralization, os.str());
+  }
+  for (int v = 0; v < surface->V.rows(); ++v)
+    POLYCUBE_ASSERT(tm.V.row(v) == surface->V.row(v), "surface vertex moved by the tet mesher");
+}
+
+SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {
+  const auto cf = faces_by_component(layout);
+  SurfaceMesh out;
+  std::vector<double> V;
+  std::vector<int> F;
+  for (size_t c = 0; c < cf.size(); ++c) {
+    io::GmshSession g;
+    g.run(ErrorKind::Tetrahedralization, "surface remeshing of component " + std::to_string(c), [&] {
+      gmsh::model::add("remesh");
+      SurfaceMesh one;
+      std::vector<int> map(s.V.rows(), -1);
+      std::vector<int> tri;
+      int n = 0;
+      for (int f : cf[c])
+        for (int k = 0; k < 3; ++k) {
+          int v = s.F(f, k);
+          if (map[v] < 0) map[v] = n++;
+          tri.push_back(map[v]);
+        }
+      one.V.resize(n, 3);
+      for (int v = 0; v < s.V.rows(); ++v)
+        if (map[v] >= 0) one.V.row(map[v]) = s.V.row(v);
+      one.F.resize(static_cast<Eigen::Index>(tri.size() / 3), 3);
+      for (size_t i = 0; i < tri.size(); ++i) one.F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = tri[i];
+      std::vector<std::vector<int>> all(1);
+      for (int f = 0; f < one.F.rows(); ++f) all[0].push_back(f);
+      add_surfaces(one, all);
+      // Split the surface into smooth patches at sharp edges (40 degrees) and build a
+      // parametrizable geometry from them, then mesh it anew.
+      gmsh::model::mesh::classifySurfaces(40 * M_PI / 180, true, true, M_PI);
+      gmsh::model::mesh::createGeometry();
+      gmsh::option::setNumber("Mesh.MeshSizeMax", h);
+      gmsh::option::setNumber("Mesh.MeshSizeMin", 0.2 * h);
+      gmsh::option::setNumber("Mesh.MeshSizeFromPoints", 0);
+      gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
+      gmsh::option::setNumber("Mesh.Algorithm", 6);
+      gmsh::model::mesh::generate(2);
+      std::vector<std::size_t> tags;
+      std::vector<double> xyz, par;
+      gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
+      std::unordered_map<std::size_t, int> id;
+      const int base = static_cast<int>(V.size() / 3);
+      for (size_t i = 0; i < tags.size(); ++i)
+        if (!id.count(tags[i])) {
+          id[tags[i]] = base + static_cast<int>(id.size());
+          V.insert(V.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+        }
+      std::vector<std::size_t> et, en;
+      gmsh::model::mesh::getElementsByType(2, et, en, -1);
+      for (std::size_t t : en) F.push_back(id.at(t));
+    });
+  }
+  out.V.resize(static_cast<Eigen::Index>(V.size() / 3), 3);
+  for (size_t i = 0; i < V.size(); ++i) out.V(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = V[i];
+  out.F.resize(static_cast<Eigen::Index>(F.size() / 3), 3);
+  for (size_t i = 0; i < F.size(); ++i) out.F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = F[i];
+  return out;
+}
+
+TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const TetOptions& opt, const Hooks& hooks,
+                       TetStats* stats) {
+  TetStats st;
+  const double diag = bbox_diagonal(s.V);
+  const auto cf = faces_by_component(layout);
+  double volume = 0;
+  for (double v : layout.volume) volume += v;  // cavities are negative
+  // Interior size for a target count: a Delaunay mesh has about 1/(0.1 h^3) tets per unit
+  // volume at edge length h (regular tets: 1/0.118 h^3); calibrated on spheres and boxes.
+  auto size_for = [&](double n) { return std::cbrt(std::max(volume, 0.0) / (0.1 * n)); };
+  double h = opt.max_size > 0 ? opt.max_size * diag : 0;
+  if (opt.target_tets > 0) h = size_for(opt.target_tets);
+
+  TetMesh tm;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    st.attempts++;
+    io::GmshSession g;
+    std::string failure;
+    try {
+      g.run(ErrorKind::Tetrahedralization, "tetrahedralization", [&] {
+        gmsh::model::add("tet");
+        std::vector<int> ent = add_surfaces(s, cf);
+        // One volume per outer shell, with the cavities directly inside it as holes.
+        for (int c = 0; c < layout.num_components(); ++c) {
+          if (layout.depth[c] % 2) continue;
+          std::vector<int> loops{gmsh::model::geo::addSurfaceLoop({ent[c]})};
+          for (int d = 0; d < layout.num_components(); ++d)
+            if (layout.parent[d] == c) loops.push_back(gmsh::model::geo::addSurfaceLoop({ent[d]}));
+          gmsh::model::geo::addVolume(loops);
+        }
+        gmsh::model::geo::synchronize();
+        gmsh::option::setNumber("Mesh.Algorithm3D", opt.algorithm == "hxt" ? 10 : 1);
+        gmsh::option::setNumber("General.NumThreads", opt.algorithm == "hxt" ? 2 : 1);
+        gmsh::option::setNumber("Mesh.Optimize", opt.optimize ? 1 : 0);
+        if (h > 0) {
+          gmsh::option::setNumber("Mesh.MeshSizeMax", h);
+          // With a target size the interior follows it instead of the boundary spacing.
+          gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", opt.target_tets > 0 ? 0 : 1);
+        }
+        hooks.report("tet", 0.1);
+        gmsh::model::mesh::generate(3);
+        std::string err = g.last_error();
+        if (!err.empty()) throw Error(ErrorKind::Tetrahedralization, err);
+      });
+    } catch (const Error& e) {
+      failure = e.what();
+    }
+    if (!failure.empty()) mesher_failed(s, failure);
+
+    // Collect: surface vertices keep their index (tag - 1), new interior vertices follow.
+    std::vector<std::size_t> tags;
+    std::vector<double> xyz, par;
+    gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
+    const int ns = static_cast<int>(s.V.rows());
+    std::unordered_map<std::size_t, int> id;
+    std::vector<double> extra;
+    for (size_t i = 0; i < tags.size(); ++i) {
+      if (tags[i] >= 1 && tags[i] <= static_cast<std::size_t>(ns)) {
+        id[tags[i]] = static_cast<int>(tags[i] - 1);
+      } else if (!id.count(tags[i])) {
+        id[tags[i]] = ns + static_cast<int>(extra.size() / 3);
+        extra.insert(extra.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+      }
+    }
+    tm.V.resize(ns + static_cast<Eigen::Index>(extra.size() / 3), 3);
+    tm.V.topRows(ns) = s.V;
+    for (size_t i = 0; i < extra.size(); ++i) tm.V(ns + static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = extra[i];
+    std::vector<std::size_t> et, en;
+    gmsh::model::mesh::getElementsByType(4, et, en, -1);
+    tm.T.resize(static_cast<Eigen::Index>(et.size()), 4);
+    for (size_t i = 0; i < en.size(); ++i) {
+      auto it = id.find(en[i]);
+      POLYCUBE_ASSERT(it != id.end(), "tet node without coordinates");
+      tm.T(static_cast<Eigen::Index>(i / 4), static_cast<Eigen::Index>(i % 4)) = it->second;
+    }
+    hooks.report("tet", 0.9);
+    if (opt.target_tets > 0 && attempt == 0) {
+      const double ratio = static_cast<double>(tm.T.rows()) / opt.target_tets;
+      if (ratio < 0.8 || ratio > 1.25) {
+        hooks.debug("tet count " + std::to_string(tm.T.rows()) + " vs target " + std::to_string(opt.target_tets) +
+                    ": adjusting the size and meshing again");
+        h *= std::cbrt(ratio);
+        continue;
+      }
+    }
+    break;
+  }
+  if (tm.T.rows() == 0) throw Error(ErrorKind::Tetrahedralization, "tetrahedralization produced no tetrahedra");
+  check_tet_mesh(tm, &s, "tetrahedralization");
+  tm.boundary = s.F;
+  st.surface_vertices = static_cast<int>(s.V.rows());
+  st.surface_triangles = static_cast<int>(s.F.rows());
+  st.quality = measure_tets(tm.V, tm.T);
+  if (stats) *stats = st;
+  return tm;
+}
+
+}  // namespace polycube

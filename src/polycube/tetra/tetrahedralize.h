@@ -1,0 +1,57 @@
+// Tetrahedralization of a validated closed surface with Gmsh's library (in process).
+//
+// By default the input triangles are the boundary of the tet mesh, unchanged: the first
+// #surface-vertices vertices of the result are the surface vertices in input order, and its
+// boundary is exactly the input triangles. Optionally the surface is first remeshed to a target
+// edge length. Sizes are relative to the bounding-box diagonal of the input.
+#pragma once
+#include <string>
+
+#include "polycube/core/log.h"
+#include "polycube/core/types.h"
+#include "polycube/validate/surface.h"
+#include "polycube/validate/tetmesh.h"
+
+namespace polycube {
+
+struct TetOptions {
+  /// > 0: remesh the surface first, to this target edge length (fraction of the bbox diagonal).
+  /// 0: keep the input triangles as the boundary.
+  double edge_length = 0;
+  /// > 0: largest tet edge inside the volume (fraction of the bbox diagonal). 0: sizes grow from
+  /// the boundary (Gmsh's default), or follow target_tets.
+  double max_size = 0;
+  /// > 0: aim for about this many tets (sets the interior size, and the surface size when
+  /// remeshing without edge_length). The kept input surface puts a floor under the count.
+  int target_tets = 0;
+  /// "delaunay" (Gmsh's default 3D Delaunay) or "hxt" (Gmsh's parallel Delaunay).
+  std::string algorithm = "delaunay";
+  /// Run Gmsh's tet optimization (improves dihedral angles, keeps the boundary).
+  bool optimize = true;
+};
+
+struct TetStats {
+  bool remeshed = false;
+  int surface_vertices = 0;       ///< vertices on the boundary of the result
+  int surface_triangles = 0;
+  TetQuality quality;
+  int attempts = 0;               ///< Gmsh runs (target_tets may need a second one)
+};
+
+/// Tetrahedralizes the closed, outward-oriented surface `s` whose component structure is `layout`
+/// (from validate_surface). Throws Error(Tetrahedralization) if Gmsh fails (naming intersecting
+/// faces when it is a self-intersection) or if the result has inverted tets or a boundary that
+/// differs from the surface.
+TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const TetOptions& opt,
+                       const Hooks& hooks, TetStats* stats = nullptr);
+
+/// Remeshes each component of a surface with Gmsh (feature-preserving classification, then
+/// 2D meshing at `edge_length_abs`). The result still needs validate_surface.
+SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double edge_length_abs);
+
+/// Checks a tet mesh against the surface it was built from: no inverted or zero-volume tet,
+/// and when `surface` is given, a boundary equal to it (same oriented triangles on the first
+/// surface.V.rows() vertices). Throws Error(Tetrahedralization) naming the problem.
+void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::string& name);
+
+}  // namespace polycube
