@@ -36,6 +36,14 @@ std::string where_list(const MeshData& m, const std::vector<int>& faces) {
   return s;
 }
 
+std::string section(const std::string& what, const std::vector<std::string>& items, size_t total, int max_listed) {
+  std::ostringstream os;
+  os << what;
+  for (size_t i = 0; i < items.size() && static_cast<int>(i) < max_listed; ++i) os << "\n  " << items[i];
+  if (total > static_cast<size_t>(max_listed)) os << "\n  ... and " << (total - max_listed) << " more";
+  return os.str();
+}
+
 [[noreturn]] void refuse(const MeshData& m, const std::string& what, const std::vector<std::string>& items, size_t total,
                          int max_listed) {
   std::ostringstream os;
@@ -115,6 +123,8 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
   rep.vertices = nv;
   rep.triangles = nf;
 
+  // 4-6. Degenerate faces, duplicate faces, non-manifold edges: reported together.
+  std::vector<std::string> problems;
   // 4. Degenerate faces.
   {
     std::vector<std::string> bad;
@@ -136,7 +146,7 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
         if (static_cast<int>(bad.size()) < opt.max_listed) bad.push_back(m.face_where(f) + " " + why);
       }
     }
-    if (n) refuse(m, std::to_string(n) + " degenerate faces:", bad, n, opt.max_listed);
+    if (n) problems.push_back(section(std::to_string(n) + " degenerate faces:", bad, n, opt.max_listed));
   }
   // 5. Duplicate faces (same three vertices, either orientation).
   {
@@ -157,7 +167,7 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
                         " use the same vertices (" + std::to_string(keys[i].first[0]) + ", " +
                         std::to_string(keys[i].first[1]) + ", " + std::to_string(keys[i].first[2]) + ")");
       }
-    if (n) refuse(m, std::to_string(n) + " duplicate faces:", bad, n, opt.max_listed);
+    if (n) problems.push_back(section(std::to_string(n) + " duplicate faces:", bad, n, opt.max_listed));
   }
   // 6. Edges: sorted half-edges, grouped by undirected edge.
   std::vector<HalfEdge> he(3 * static_cast<size_t>(nf));
@@ -189,7 +199,14 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
                         std::to_string(e - b) + " faces: " + where_list(m, fs));
         }
       }
-    if (n) refuse(m, std::to_string(n) + " non-manifold edges (vertex ids are 0-based):", bad, n, opt.max_listed);
+    if (n)
+      problems.insert(problems.begin(),
+                      section(std::to_string(n) + " non-manifold edges (vertex ids are 0-based):", bad, n, opt.max_listed));
+  }
+  if (!problems.empty()) {
+    std::string msg = name + ": ";
+    for (size_t i = 0; i < problems.size(); ++i) msg += (i ? "\n" : "") + problems[i];
+    throw Error(ErrorKind::InvalidMesh, msg);
   }
   // 7. Non-manifold vertices: the faces around a vertex must form a single fan.
   {

@@ -1,0 +1,139 @@
+// End-to-end runs of the command-line tool.
+#include <filesystem>
+#include <nlohmann/json.hpp>
+
+#include "polycube/examples/examples.h"
+#include "polycube/io/readers.h"
+#include "polycube/io/writers.h"
+#include "polycube/validate/tetmesh.h"
+#include "test_util.h"
+
+using namespace polycube;
+using namespace polycube::test;
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+json report(const std::string& dir) { return json::parse(read_text(dir + "/report.json")); }
+}  // namespace
+
+TEST(Cli, HelpListsOptionsWithDefaults) {
+  RunResult r = run_cli("--help");
+  EXPECT_EQ(r.code, 0);
+  for (const char* s : {"--until", "--tets", "--max-size", "--edge-length", "--example", "-q", "-v", "Exit codes", "[0.04]"})
+    EXPECT_NE(r.output.find(s), std::string::npos) << s;
+}
+
+TEST(Cli, ExampleList) {
+  RunResult r = run_cli("--example list");
+  EXPECT_EQ(r.code, 0);
+  for (const auto& e : examples::list()) EXPECT_NE(r.output.find(e.name), std::string::npos);
+}
+
+class CliExample : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(CliExample, RunsToTetMesh) {
+  std::string out = temp_dir("ex_" + GetParam());
+  RunResult r = run_cli("--example " + GetParam() + " -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_EQ(j["input"]["closed"], true);
+  EXPECT_EQ(j["tetmesh"]["inverted"], 0);
+  EXPECT_GT(j["tetmesh"]["tets"].get<int>(), 1000);
+  EXPECT_GT(j["tetmesh"]["min_dihedral_deg"].get<double>(), 1.0);
+  EXPECT_GE(j["timings"]["tet"].get<double>(), 0.0);
+  const int genus = GetParam() == "box_hole" || GetParam() == "torus" ? 1 : GetParam() == "rocker" ? 2 : 0;
+  EXPECT_EQ(j["input"]["genus"], genus);
+  EXPECT_EQ(j["input"]["components"], GetParam() == "two_components" ? 2 : 1);
+  // Both output formats hold the same mesh, which reads back with no inverted tet.
+  for (const char* f : {"/tetmesh.mesh", "/tetmesh.vtk"}) {
+    MeshData m = io::read_mesh(out + f);
+    EXPECT_EQ(m.T.rows(), j["tetmesh"]["tets"].get<int>());
+    EXPECT_EQ(measure_tets(m.V, m.T).inverted, 0);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Examples, CliExample,
+                         ::testing::Values("box_hole", "torus", "l_bracket", "sphere", "rocker", "two_components"));
+
+TEST(Cli, UntilLoadWritesNoTetMeshAndClearsOldResults) {
+  std::string out = temp_dir("until_load");
+  write_text(out + "/tetmesh.vtk", "old");
+  RunResult r = run_cli("--example sphere --until load -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_TRUE(r.output.empty()) << "-q prints nothing on success: " << r.output;
+  EXPECT_FALSE(fs::exists(out + "/tetmesh.vtk"));
+  EXPECT_TRUE(fs::exists(out + "/surface.mesh"));
+  EXPECT_EQ(report(out)["stopped_after"], "load");
+  EXPECT_FALSE(report(out).contains("tetmesh"));
+}
+
+TEST(Cli, SurfaceFileKeepsScaleAndPosition) {
+  auto s = sphere(3, Vec3(100, -20, 5), 7.5);
+  std::string dir = temp_dir("scale");
+  io::write_stl(dir + "/s.stl", s.V, s.F, true);
+  RunResult r = run_cli(dir + "/s.stl -o " + dir + "/out --tets 3000");
+  ASSERT_EQ(r.code, 0) << r.output;
+  MeshData m = io::read_mesh(dir + "/out/tetmesh.mesh");
+  Vec3 lo = m.V.colwise().minCoeff(), hi = m.V.colwise().maxCoeff();
+  Vec3 elo = s.V.colwise().minCoeff(), ehi = s.V.colwise().maxCoeff();
+  EXPECT_NEAR((lo - elo).norm(), 0, 1e-5);  // STL stores floats
+  EXPECT_NEAR((hi - ehi).norm(), 0, 1e-5);
+  json j = report(dir + "/out");
+  EXPECT_EQ(j["input"]["format"], "stl-binary");
+  EXPECT_GT(j["tetmesh"]["tets"].get<int>(), 1800);
+  EXPECT_LT(j["tetmesh"]["tets"].get<int>(), 4500);
+}
+
+TEST(Cli, RepairedOrientationIsReported) {
+  auto s = flipped(sphere(2));
+  std::string dir = temp_dir("repair");
+  io::write_obj(dir + "/in.obj", s.V, s.F);
+  RunResult r = run_cli(dir + "/in.obj -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("repaired"), std::string::npos) << r.output;
+  json j = report(dir + "/out");
+  EXPECT_EQ(j["input"]["repaired"], true);
+  EXPECT_EQ(j["input"]["repairs"]["components_reversed"], 1);
+  EXPECT_EQ(j["tetmesh"]["inverted"], 0);
+}
+
+TEST(Cli, TetMeshInputSkipsTetrahedralization) {
+  std::string dir = temp_dir("tetin");
+  ASSERT_EQ(run_cli("--example sphere -q -o " + dir + "/a").code, 0);
+  RunResult r = run_cli(dir + "/a/tetmesh.vtk -o " + dir + "/b");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json a = report(dir + "/a"), b = report(dir + "/b");
+  EXPECT_EQ(b["input"]["kind"], "tet");
+  EXPECT_EQ(b["tetmesh"]["source"], "input");
+  EXPECT_EQ(b["tetmesh"]["tets"], a["tetmesh"]["tets"]);
+}
+
+TEST(Cli, HexMeshInputIsTetrahedralized) {
+  // A 2x1x1 block of two hexes.
+  MeshData m;
+  m.V.resize(12, 3);
+  for (int i = 0; i < 12; ++i) m.V.row(i) << i % 3, (i / 3) % 2, i / 6;
+  auto id = [](int x, int y, int z) { return x + 3 * y + 6 * z; };
+  m.H.resize(2, 8);
+  for (int x = 0; x < 2; ++x)
+    m.H.row(x) << id(x, 0, 0), id(x + 1, 0, 0), id(x + 1, 1, 0), id(x, 1, 0), id(x, 0, 1), id(x + 1, 0, 1), id(x + 1, 1, 1),
+        id(x, 1, 1);
+  std::string dir = temp_dir("hexin");
+  io::write_medit(dir + "/h.mesh", m);
+  RunResult r = run_cli(dir + "/h.mesh -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(dir + "/out");
+  EXPECT_EQ(j["input"]["kind"], "hex");
+  EXPECT_EQ(j["input"]["triangles"], 20);
+  EXPECT_EQ(j["tetmesh"]["inverted"], 0);
+}
+
+TEST(Cli, BinaryVtkOutput) {
+  std::string out = temp_dir("vtkbin");
+  ASSERT_EQ(run_cli("--example l_bracket --vtk-binary -q -o " + out).code, 0);
+  MeshData m = io::read_mesh(out + "/tetmesh.vtk");
+  EXPECT_EQ(m.format, "vtk-binary");
+  EXPECT_EQ(m.T.rows(), report(out)["tetmesh"]["tets"].get<int>());
+}

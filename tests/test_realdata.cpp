@@ -1,0 +1,89 @@
+// Real meshes from ../shared/meshes (public data, never copied into the repository): each one
+// loads and tetrahedralizes with no inverted tet, or is refused with the expected message.
+// Skips with a message when ../shared is absent (set POLYCUBE_SHARED to use another copy).
+#include <filesystem>
+
+#include "polycube/core/error.h"
+#include "polycube/pipeline/pipeline.h"
+#include "test_util.h"
+
+using namespace polycube;
+using namespace polycube::test;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string shared_dir() {
+  const char* env = std::getenv("POLYCUBE_SHARED");
+  return env ? env : POLYCUBE_SHARED_DIR;
+}
+
+std::vector<std::string> shared_meshes() {
+  std::vector<std::string> files;
+  std::error_code ec;
+  const fs::path root = fs::path(shared_dir()) / "meshes";
+  for (const char* sub : {"basic", "organic", "cad", "tet", "bad"}) {
+    std::vector<std::string> here;
+    for (auto& e : fs::directory_iterator(root / sub, ec)) here.push_back(std::string(sub) + "/" + e.path().filename().string());
+    std::sort(here.begin(), here.end());
+    files.insert(files.end(), here.begin(), here.end());
+  }
+  if (files.empty()) files.push_back("absent");
+  return files;
+}
+
+// Inputs that must be refused, and a fragment of the expected message.
+struct Refusal {
+  const char* file;
+  ErrorKind kind;
+  std::vector<std::string> fragments;
+};
+const std::vector<Refusal> kRefused = {
+    {"bad/conrod_nonmanifold.stl", ErrorKind::InvalidMesh,
+     {"3 non-manifold edges", "edge (115, 311) is shared by 4 faces", "edge (633, 807)", "edge (667, 813)"}},
+};
+
+std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
+  std::string s = info.param;
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  return s;
+}
+
+}  // namespace
+
+class RealData : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(RealData, LoadsAndTetrahedralizes) {
+  if (GetParam() == "absent") GTEST_SKIP() << "no meshes under " << shared_dir() << "/meshes (../shared absent): skipped";
+  PipelineOptions opt;
+  opt.input = shared_dir() + "/meshes/" + GetParam();
+  opt.out_dir = temp_dir("real");
+  opt.until = Stage::Tet;
+  for (const Refusal& r : kRefused)
+    if (GetParam() == r.file) {
+      try {
+        run_pipeline(opt);
+        FAIL() << GetParam() << " must be refused";
+      } catch (const Error& e) {
+        EXPECT_EQ(e.kind(), r.kind);
+        for (const auto& f : r.fragments) EXPECT_NE(std::string(e.what()).find(f), std::string::npos) << f << " in:\n" << e.what();
+      }
+      return;
+    }
+  nlohmann::json j;
+  try {
+    j = run_pipeline(opt);
+  } catch (const Error& e) {
+    FAIL() << GetParam() << ": " << e.what();
+  }
+  EXPECT_EQ(j["status"], "ok");
+  EXPECT_EQ(j["input"]["closed"], true);
+  EXPECT_EQ(j["tetmesh"]["inverted"], 0);
+  EXPECT_EQ(j["tetmesh"]["zero_volume"], 0);
+  EXPECT_GT(j["tetmesh"]["tets"].get<int>(), 0);
+  EXPECT_TRUE(fs::exists(opt.out_dir + "/tetmesh.mesh"));
+  EXPECT_TRUE(fs::exists(opt.out_dir + "/tetmesh.vtk"));
+}
+
+INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealData, ::testing::ValuesIn(shared_meshes()), test_name);
