@@ -134,7 +134,7 @@ TEST(IO, PlyWithExtraPropertiesAndFloat) {
   auto m = io::read_mesh(p);
   EXPECT_EQ(m.V.rows(), 3);
   EXPECT_EQ(m.F.rows(), 1);
-  EXPECT_EQ(m.face_line[0], 17);
+  EXPECT_EQ(m.face_line[0], 18);
 }
 
 TEST(IO, MeditRoundTripAllElements) {
@@ -216,7 +216,7 @@ TEST(IO, MshRoundTripSurfaceAndVolume) {
   io::write_msh(p, make_mesh_data(s.V, s.F));
   auto r = io::read_mesh(p);
   EXPECT_EQ(r.format, "msh");
-  expect_same(s.V, s.F, r);
+  expect_same(s.V, s.F, r, 1e-15 * 1e3);  // Gmsh writes 16 significant digits
   MeshData m;
   m.V = s.V.topRows(8);
   m.T.resize(2, 4);
@@ -224,7 +224,7 @@ TEST(IO, MshRoundTripSurfaceAndVolume) {
   io::write_msh(p, m);
   r = io::read_mesh(p);
   EXPECT_EQ(r.T, m.T);
-  EXPECT_EQ(r.V, m.V);
+  EXPECT_LE((r.V - m.V).cwiseAbs().maxCoeff(), 1e-12);
 }
 
 TEST(IO, CadStepAndBrepImport) {

@@ -51,7 +51,7 @@ bool TextReader::next(std::string_view& tok) {
 std::string_view TextReader::expect(const char* what) {
   std::string_view t;
   if (!next(t)) {
-    line_ = cur_;
+    // Report the line of the last token read: where the data stops.
     fail(std::string("unexpected end of file while reading ") + what + " (file truncated?)");
   }
   return t;

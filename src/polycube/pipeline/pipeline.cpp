@@ -245,7 +245,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.info("tetrahedralizing (" + opt.tet.algorithm + ")");
         tm = tetrahedralize(used, used_layout, opt.tet, hooks, &stats);
         tj = tet_json(tm, stats.quality);
-        tj["source"] = "gmsh-" + opt.tet.algorithm;
+        tj["source"] = "gmsh-" + stats.algorithm;
         tj["remeshed"] = el > 0;
         tj["surface_vertices"] = stats.surface_vertices;
         tj["gmsh_runs"] = stats.attempts;

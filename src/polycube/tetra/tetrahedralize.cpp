@@ -17,6 +17,13 @@ namespace polycube {
 
 namespace {
 
+struct CoordHash {
+  size_t operator()(const std::array<double, 3>& k) const {
+    std::hash<double> h;
+    return h(k[0]) * 73856093u ^ h(k[1]) * 19349663u ^ h(k[2]) * 83492791u;
+  }
+};
+
 double bbox_diagonal(const MatX3d& V) {
   if (V.rows() == 0) return 0;
   return (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
@@ -101,8 +108,6 @@ void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::st
       os << " (e.g. missing triangle " << missing[0][0] << " " << missing[0][1] << " " << missing[0][2] << ")";
     throw Error(ErrorKind::Tetrahedralization, os.str());
   }
-  for (int v = 0; v < surface->V.rows(); ++v)
-    POLYCUBE_ASSERT(tm.V.row(v) == surface->V.row(v), "surface vertex moved by the tet mesher");
 }
 
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {
@@ -200,8 +205,9 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
         gmsh::option::setNumber("Mesh.Optimize", opt.optimize ? 1 : 0);
         if (h > 0) {
           gmsh::option::setNumber("Mesh.MeshSizeMax", h);
-          // With a target size the interior follows it instead of the boundary spacing.
-          gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", opt.target_tets > 0 ? 0 : 1);
+          // The interior follows h instead of the boundary spacing (Gmsh's Delaunay refinement
+          // ignores MeshSizeMax when sizes are extended from the boundary).
+          gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
         }
         hooks.report("tet", 0.1);
         gmsh::model::mesh::generate(3);
@@ -213,17 +219,23 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
     }
     if (!failure.empty()) mesher_failed(s, failure);
 
-    // Collect: surface vertices keep their index (tag - 1), new interior vertices follow.
+    // Collect: surface vertices keep their index, new interior vertices follow. Gmsh may renumber
+    // nodes while meshing, so surface nodes are recognized by their (unchanged) coordinates.
     std::vector<std::size_t> tags;
     std::vector<double> xyz, par;
     gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
     const int ns = static_cast<int>(s.V.rows());
+    std::unordered_map<std::array<double, 3>, int, CoordHash> by_coord;
+    by_coord.reserve(ns);
+    for (int v = 0; v < ns; ++v) by_coord.emplace(std::array<double, 3>{s.V(v, 0), s.V(v, 1), s.V(v, 2)}, v);
     std::unordered_map<std::size_t, int> id;
     std::vector<double> extra;
     for (size_t i = 0; i < tags.size(); ++i) {
-      if (tags[i] >= 1 && tags[i] <= static_cast<std::size_t>(ns)) {
-        id[tags[i]] = static_cast<int>(tags[i] - 1);
-      } else if (!id.count(tags[i])) {
+      if (id.count(tags[i])) continue;
+      auto it = by_coord.find({xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+      if (it != by_coord.end()) {
+        id[tags[i]] = it->second;
+      } else {
         id[tags[i]] = ns + static_cast<int>(extra.size() / 3);
         extra.insert(extra.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
       }
@@ -252,7 +264,19 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
     break;
   }
   if (tm.T.rows() == 0) throw Error(ErrorKind::Tetrahedralization, "tetrahedralization produced no tetrahedra");
-  check_tet_mesh(tm, &s, "tetrahedralization");
+  try {
+    check_tet_mesh(tm, &s, "tetrahedralization");
+  } catch (const Error& e) {
+    if (opt.algorithm != "hxt") throw;
+    // Gmsh 4.8's HXT occasionally leaves a few tets out; its Delaunay mesher does not.
+    hooks.warn(std::string("HXT result rejected (") + e.what() + "); meshing again with the Delaunay algorithm");
+    TetOptions o2 = opt;
+    o2.algorithm = "delaunay";
+    TetMesh r = tetrahedralize(s, layout, o2, hooks, stats);
+    if (stats) stats->attempts += st.attempts;
+    return r;
+  }
+  st.algorithm = opt.algorithm;
   tm.boundary = s.F;
   st.surface_vertices = static_cast<int>(s.V.rows());
   st.surface_triangles = static_cast<int>(s.F.rows());

@@ -24,7 +24,8 @@ struct TetOptions {
   /// > 0: aim for about this many tets (sets the interior size, and the surface size when
   /// remeshing without edge_length). The kept input surface puts a floor under the count.
   int target_tets = 0;
-  /// "delaunay" (Gmsh's default 3D Delaunay) or "hxt" (Gmsh's parallel Delaunay).
+  /// "delaunay" (Gmsh's default 3D Delaunay) or "hxt" (Gmsh's parallel Delaunay, faster on large
+  /// meshes; if its result fails the checks, the mesh is made again with "delaunay").
   std::string algorithm = "delaunay";
   /// Run Gmsh's tet optimization (improves dihedral angles, keeps the boundary).
   bool optimize = true;
@@ -36,6 +37,7 @@ struct TetStats {
   int surface_triangles = 0;
   TetQuality quality;
   int attempts = 0;               ///< Gmsh runs (target_tets may need a second one)
+  std::string algorithm;          ///< algorithm of the accepted mesh (HXT falls back to Delaunay)
 };
 
 /// Tetrahedralizes the closed, outward-oriented surface `s` whose component structure is `layout`

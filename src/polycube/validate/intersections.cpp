@@ -18,12 +18,13 @@ bool segment_hits_triangle(const Vec3& p, const Vec3& q, const Vec3& a, const Ve
   const double inv = 1.0 / det;
   const Vec3 s = p - a;
   const double u = s.dot(h) * inv;
-  if (u < 1e-12 || u > 1 - 1e-12) return false;
+  // Closed tests: touching counts, since the faces share no vertex.
+  if (u < -1e-12 || u > 1 + 1e-12) return false;
   const Vec3 qv = s.cross(e1);
   const double v = d.dot(qv) * inv;
-  if (v < 1e-12 || u + v > 1 - 1e-12) return false;
+  if (v < -1e-12 || u + v > 1 + 1e-12) return false;
   const double t = e2.dot(qv) * inv;
-  return t > 1e-12 && t < 1 - 1e-12;
+  return t >= -1e-12 && t <= 1 + 1e-12;
 }
 }  // namespace
 
