@@ -208,6 +208,7 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
           // The interior follows h instead of the boundary spacing (Gmsh's Delaunay refinement
           // ignores MeshSizeMax when sizes are extended from the boundary).
           gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
+          gmsh::option::setNumber("Mesh.MeshSizeFromPoints", 0);
         }
         hooks.report("tet", 0.1);
         gmsh::model::mesh::generate(3);
