@@ -41,6 +41,9 @@ struct Refusal {
 const std::vector<Refusal> kRefused = {
     {"bad/conrod_nonmanifold.stl", ErrorKind::InvalidMesh,
      {"3 non-manifold edges", "edge (115, 311) is shared by 4 faces", "edge (633, 807)", "edge (667, 813)"}},
+    // The cow's surface crosses itself near (-0.445, -0.05, -0.02): both Gmsh's boundary recovery and
+    // our own segment/triangle test find it, so it cannot bound a tet mesh with its triangles kept.
+    {"organic/cow.off", ErrorKind::InvalidMesh, {"intersects itself", "faces 4219 and 5500"}},
 };
 
 std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
