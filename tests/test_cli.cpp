@@ -137,3 +137,13 @@ TEST(Cli, BinaryVtkOutput) {
   EXPECT_EQ(m.format, "vtk-binary");
   EXPECT_EQ(m.T.rows(), report(out)["tetmesh"]["tets"].get<int>());
 }
+
+TEST(Cli, RemeshedSurfaceBeforeTetrahedralization) {
+  std::string out = temp_dir("remesh");
+  RunResult r = run_cli("--example torus --edge-length 0.03 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["tetmesh"]["remeshed"], true);
+  EXPECT_EQ(j["tetmesh"]["inverted"], 0);
+  EXPECT_NE(j["tetmesh"]["boundary_triangles"], j["input"]["triangles"]);
+}

@@ -112,56 +112,74 @@ void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::st
 
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {
   const auto cf = faces_by_component(layout);
-  SurfaceMesh out;
   std::vector<double> V;
   std::vector<int> F;
   for (size_t c = 0; c < cf.size(); ++c) {
-    io::GmshSession g;
-    g.run(ErrorKind::Tetrahedralization, "surface remeshing of component " + std::to_string(c), [&] {
-      gmsh::model::add("remesh");
-      SurfaceMesh one;
-      std::vector<int> map(s.V.rows(), -1);
-      std::vector<int> tri;
-      int n = 0;
-      for (int f : cf[c])
-        for (int k = 0; k < 3; ++k) {
-          int v = s.F(f, k);
-          if (map[v] < 0) map[v] = n++;
-          tri.push_back(map[v]);
-        }
-      one.V.resize(n, 3);
-      for (int v = 0; v < s.V.rows(); ++v)
-        if (map[v] >= 0) one.V.row(map[v]) = s.V.row(v);
-      one.F.resize(static_cast<Eigen::Index>(tri.size() / 3), 3);
-      for (size_t i = 0; i < tri.size(); ++i) one.F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = tri[i];
-      std::vector<std::vector<int>> all(1);
-      for (int f = 0; f < one.F.rows(); ++f) all[0].push_back(f);
-      add_surfaces(one, all);
-      // Split the surface into smooth patches at sharp edges (40 degrees) and build a
-      // parametrizable geometry from them, then mesh it anew.
-      gmsh::model::mesh::classifySurfaces(40 * M_PI / 180, true, true, M_PI);
-      gmsh::model::mesh::createGeometry();
-      gmsh::option::setNumber("Mesh.MeshSizeMax", h);
-      gmsh::option::setNumber("Mesh.MeshSizeMin", 0.2 * h);
-      gmsh::option::setNumber("Mesh.MeshSizeFromPoints", 0);
-      gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
-      gmsh::option::setNumber("Mesh.Algorithm", 6);
-      gmsh::model::mesh::generate(2);
-      std::vector<std::size_t> tags;
-      std::vector<double> xyz, par;
-      gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
-      std::unordered_map<std::size_t, int> id;
-      const int base = static_cast<int>(V.size() / 3);
-      for (size_t i = 0; i < tags.size(); ++i)
-        if (!id.count(tags[i])) {
-          id[tags[i]] = base + static_cast<int>(id.size());
-          V.insert(V.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
-        }
-      std::vector<std::size_t> et, en;
-      gmsh::model::mesh::getElementsByType(2, et, en, -1);
-      for (std::size_t t : en) F.push_back(id.at(t));
-    });
+    // The component alone, compactly numbered.
+    SurfaceMesh one;
+    std::vector<int> map(s.V.rows(), -1), tri;
+    int n = 0;
+    for (int f : cf[c])
+      for (int k = 0; k < 3; ++k) {
+        int v = s.F(f, k);
+        if (map[v] < 0) map[v] = n++;
+        tri.push_back(map[v]);
+      }
+    one.V.resize(n, 3);
+    for (int v = 0; v < s.V.rows(); ++v)
+      if (map[v] >= 0) one.V.row(map[v]) = s.V.row(v);
+    one.F.resize(static_cast<Eigen::Index>(tri.size() / 3), 3);
+    for (size_t i = 0; i < tri.size(); ++i) one.F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = tri[i];
+    std::vector<std::vector<int>> all(1);
+    for (int f = 0; f < one.F.rows(); ++f) all[0].push_back(f);
+
+    // Split the surface into smooth patches at sharp edges and build a parametrizable geometry
+    // from them, then mesh it anew. Gmsh's patch splitting depends on the angle: try a few.
+    std::string last_error;
+    bool done = false;
+    for (double angle : {40.0, 25.0, 60.0}) {
+      try {
+        io::GmshSession g;
+        g.run(ErrorKind::Tetrahedralization, "surface remeshing of component " + std::to_string(c), [&] {
+          gmsh::model::add("remesh");
+          add_surfaces(one, all);
+          gmsh::model::mesh::classifySurfaces(angle * M_PI / 180, true, true, M_PI);
+          gmsh::model::mesh::createGeometry();
+          gmsh::option::setNumber("Mesh.MeshSizeMax", h);
+          gmsh::option::setNumber("Mesh.MeshSizeMin", 0.2 * h);
+          gmsh::option::setNumber("Mesh.MeshSizeFromPoints", 0);
+          gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
+          gmsh::option::setNumber("Mesh.Algorithm", 6);
+          gmsh::model::mesh::generate(2);
+          std::vector<std::size_t> tags;
+          std::vector<double> xyz, par;
+          gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
+          std::unordered_map<std::size_t, int> id;
+          const int base = static_cast<int>(V.size() / 3);
+          std::vector<double> cv;
+          for (size_t i = 0; i < tags.size(); ++i)
+            if (!id.count(tags[i])) {
+              id[tags[i]] = base + static_cast<int>(id.size());
+              cv.insert(cv.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
+            }
+          std::vector<std::size_t> et, en;
+          gmsh::model::mesh::getElementsByType(2, et, en, -1);
+          if (et.empty()) throw Error(ErrorKind::Tetrahedralization, "no triangles generated");
+          V.insert(V.end(), cv.begin(), cv.end());
+          for (std::size_t t : en) F.push_back(id.at(t));
+        });
+        done = true;
+        break;
+      } catch (const Error& e) {
+        last_error = e.what();
+      }
+    }
+    if (!done)
+      throw Error(ErrorKind::Tetrahedralization,
+                  last_error + " (surface remeshing failed at feature angles 40, 25 and 60 degrees; keep the input "
+                               "triangles by leaving --edge-length at 0)");
   }
+  SurfaceMesh out;
   out.V.resize(static_cast<Eigen::Index>(V.size() / 3), 3);
   for (size_t i = 0; i < V.size(); ++i) out.V(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = V[i];
   out.F.resize(static_cast<Eigen::Index>(F.size() / 3), 3);
