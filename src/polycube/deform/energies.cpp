@@ -1,0 +1,324 @@
+#include "polycube/deform/energies.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+
+namespace polycube::deform {
+
+void DenseHessian::add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& h) {
+  for (int p = 0; p < nv; ++p)
+    for (int q = 0; q < nv; ++q) H.block<3, 3>(3 * v[p], 3 * v[q]) += h.block<3, 3>(3 * p, 3 * q);
+}
+
+std::vector<FacePair> face_pairs(const MatX3i& F) {
+  std::map<std::pair<int, int>, std::pair<int, int>> half;  // directed edge -> (face, opposite vertex)
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) half[{F(f, k), F(f, (k + 1) % 3)}] = {f, F(f, (k + 2) % 3)};
+  std::vector<FacePair> out;
+  for (auto& [e, fc] : half) {
+    auto it = half.find({e.second, e.first});
+    if (it == half.end() || fc.first > it->second.first) continue;
+    out.push_back({fc.first, it->second.first, e.first, e.second, fc.second, it->second.second});
+  }
+  return out;
+}
+
+namespace {
+
+inline Eigen::Matrix3d skew(const Vec3& w) {
+  Eigen::Matrix3d S;
+  S << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return S;
+}
+
+// dN/dx for N = (xb - xa) x (xc - xa) / 2: a 3 x 9 matrix over (xa, xb, xc).
+inline Eigen::Matrix<double, 3, 9> normal_jacobian(const Vec3& xa, const Vec3& xb, const Vec3& xc) {
+  const Vec3 u = xb - xa, v = xc - xa;
+  Eigen::Matrix<double, 3, 9> J;
+  J.block<3, 3>(0, 3) = -0.5 * skew(v);  // d(u x v)/du = -[v]x
+  J.block<3, 3>(0, 6) = 0.5 * skew(u);   // d(u x v)/dv = [u]x
+  J.block<3, 3>(0, 0) = -(J.block<3, 3>(0, 3) + J.block<3, 3>(0, 6));
+  return J;
+}
+
+// sum_k w_k d^2 N_k / dx^2 (constant in x): off-diagonal blocks -/+ [w]x / 2.
+inline Eigen::Matrix<double, 9, 9> normal_second(const Vec3& w) {
+  Eigen::Matrix<double, 9, 9> H = Eigen::Matrix<double, 9, 9>::Zero();
+  const Eigen::Matrix3d S = 0.5 * skew(w);
+  const int pairs[3][2] = {{0, 1}, {1, 2}, {2, 0}};  // (a,b), (b,c), (c,a)
+  for (auto& p : pairs) {
+    H.block<3, 3>(3 * p[0], 3 * p[1]) -= S;
+    H.block<3, 3>(3 * p[1], 3 * p[0]) += S;
+  }
+  return H;
+}
+
+template <int N>
+Eigen::Matrix<double, N, N> project_psd(const Eigen::Matrix<double, N, N>& H) {
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> es(H);
+  Eigen::Matrix<double, N, 1> l = es.eigenvalues().cwiseMax(0.0);
+  return es.eigenvectors() * l.asDiagonal() * es.eigenvectors().transpose();
+}
+
+inline Vec3 row(const MatX3d& X, int i) { return X.row(i).transpose(); }
+
+// Unit normal of a face and its derivative dn/dx (3 x 9).
+struct UnitNormal {
+  Vec3 n;
+  double area;
+  Eigen::Matrix<double, 3, 9> dn;
+};
+inline UnitNormal unit_normal(const MatX3d& X, int a, int b, int c) {
+  UnitNormal u;
+  const Vec3 xa = row(X, a), xb = row(X, b), xc = row(X, c);
+  const Vec3 N = 0.5 * (xb - xa).cross(xc - xa);
+  u.area = N.norm();
+  u.n = u.area > 0 ? Vec3(N / u.area) : Vec3::Zero();
+  const Eigen::Matrix<double, 3, 9> J = normal_jacobian(xa, xb, xc);
+  u.dn = u.area > 0 ? Eigen::Matrix<double, 3, 9>((Eigen::Matrix3d::Identity() - u.n * u.n.transpose()) / u.area * J)
+                    : Eigen::Matrix<double, 3, 9>::Zero();
+  return u;
+}
+
+// Scatters the 9-vector derivative of face (a,b,c) and the 9-vector of face (b,a,d) (sharing edge
+// a-b) into the 12-vector over (a, b, c, d).
+inline Eigen::Matrix<double, 3, 12> pair_jac_f(const Eigen::Matrix<double, 3, 9>& df) {
+  Eigen::Matrix<double, 3, 12> J = Eigen::Matrix<double, 3, 12>::Zero();
+  J.leftCols<9>() = df;
+  return J;
+}
+inline Eigen::Matrix<double, 3, 12> pair_jac_g(const Eigen::Matrix<double, 3, 9>& dg) {
+  // g's local order is (b, a, d).
+  Eigen::Matrix<double, 3, 12> J = Eigen::Matrix<double, 3, 12>::Zero();
+  J.block<3, 3>(0, 3) = dg.block<3, 3>(0, 0);
+  J.block<3, 3>(0, 0) = dg.block<3, 3>(0, 3);
+  J.block<3, 3>(0, 9) = dg.block<3, 3>(0, 6);
+  return J;
+}
+
+template <int N>
+inline void scatter_grad(Eigen::VectorXd& g, const int* v, const Eigen::Matrix<double, N, 1>& gl) {
+  for (int p = 0; p < N / 3; ++p) g.segment<3>(3 * v[p]) += gl.template segment<3>(3 * p);
+}
+
+}  // namespace
+
+Vec3 area_normal(const MatX3d& X, int a, int b, int c) {
+  return 0.5 * (row(X, b) - row(X, a)).cross(row(X, c) - row(X, a));
+}
+
+double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad,
+                 HessianSink* hess, bool project) {
+  double E = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
+    const Vec3 xa = row(X, v[0]), xb = row(X, v[1]), xc = row(X, v[2]);
+    const Vec3 N = 0.5 * (xb - xa).cross(xc - xa);
+    const double N2 = N.squaredNorm();
+    Vec3 dg = Vec3::Zero();                                   // dE/dN
+    Eigen::Matrix3d Hg = Eigen::Matrix3d::Zero();             // d2E/dN2
+    for (int k = 0; k < 3; ++k) {
+      const double s = std::sqrt(N[k] * N[k] + eps * N2);
+      E += s;
+      if (s <= 0) continue;
+      Vec3 q = eps * N;
+      q[k] += N[k];  // (e_k e_k^T + eps I) N
+      dg += q / s;
+      if (hess) {
+        Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
+        M(k, k) += 1;
+        Hg += M / s - q * q.transpose() / (s * s * s);
+      }
+    }
+    if (!grad && !hess) continue;
+    const Eigen::Matrix<double, 3, 9> J = normal_jacobian(xa, xb, xc);
+    if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(weight * J.transpose() * dg));
+    if (hess) {
+      Eigen::Matrix<double, 9, 9> H = J.transpose() * Hg * J + normal_second(dg);
+      H = 0.5 * (H + H.transpose());
+      if (project) H = project_psd<9>(H);
+      hess->add(v, 3, weight * H);
+    }
+  }
+  return weight * E;
+}
+
+void l1_measure(const MatX3d& X, const MatX3i& F, double& l1, double& area) {
+  l1 = area = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    Vec3 N = area_normal(X, F(f, 0), F(f, 1), F(f, 2));
+    l1 += N.cwiseAbs().sum();
+    area += N.norm();
+  }
+}
+
+ArapRest ArapRest::build(const MatX3d& X, const MatX4i& T) {
+  ArapRest r;
+  r.Dm_inv.resize(T.rows());
+  r.w.resize(T.rows());
+  double total = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    Eigen::Matrix3d Dm;
+    for (int m = 0; m < 3; ++m) Dm.col(m) = row(X, T(t, m + 1)) - row(X, T(t, 0));
+    r.Dm_inv[t] = Dm.inverse();
+    r.w[t] = Dm.determinant() / 6.0;
+    total += r.w[t];
+  }
+  for (double& w : r.w) w /= total;
+  return r;
+}
+
+double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
+                   HessianSink* hess, std::vector<double>* per_tet) {
+  double E = 0;
+  if (per_tet) per_tet->resize(T.rows());
+  for (int t = 0; t < T.rows(); ++t) {
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+    const Eigen::Matrix3d Fm = Ds * Di;
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(Fm, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
+    if ((U * V.transpose()).determinant() < 0) U.col(2) *= -1;  // closest rotation, not reflection
+    const Eigen::Matrix3d R = U * V.transpose();
+    const double delta = 0.5 * (Fm - R).squaredNorm();
+    if (per_tet) (*per_tet)[t] = delta;
+    E += rest.w[t] * delta;
+    // B: 4 x 3, row p = d F / d x_p (as a row vector multiplying x_p^T).
+    Eigen::Matrix<double, 4, 3> B;
+    B.bottomRows<3>() = Di;
+    B.row(0) = -Di.colwise().sum();
+    if (grad) {
+      const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
+      for (int p = 0; p < 4; ++p) grad->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
+    }
+    if (hess) {
+      const Eigen::Matrix4d K = B * B.transpose();
+      Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
+      for (int p = 0; p < 4; ++p)
+        for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
+      hess->add(v, 4, weight * rest.w[t] * H);
+    }
+  }
+  return weight * E;
+}
+
+double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
+                      Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (const FacePair& p : pairs) {
+    const int v[4] = {p.a, p.b, p.c, p.d};
+    const UnitNormal nf = unit_normal(X, F(p.f, 0), F(p.f, 1), F(p.f, 2));
+    const UnitNormal ng = unit_normal(X, p.b, p.a, p.d);
+    (void)F;
+    const double D = 1.0 + nf.n.dot(ng.n);
+    if (!(D > 0)) return std::numeric_limits<double>::infinity();
+    E -= std::log(D);
+    if (!grad && !hess) continue;
+    // Face f may start at any corner: reorder its derivative to (a, b, c).
+    Eigen::Matrix<double, 3, 9> dnf;
+    for (int k = 0; k < 3; ++k) {
+      int id = F(p.f, k);
+      int slot = id == p.a ? 0 : id == p.b ? 1 : 2;
+      dnf.block<3, 3>(0, 3 * slot) = nf.dn.block<3, 3>(0, 3 * k);
+    }
+    const Eigen::Matrix<double, 1, 12> dD = ng.n.transpose() * pair_jac_f(dnf) + nf.n.transpose() * pair_jac_g(ng.dn);
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight / D * dD.transpose()));
+    if (hess) hess->add(v, 4, weight / (D * D) * dD.transpose() * dD);
+  }
+  return weight * E;
+}
+
+namespace {
+// Per pair: the derivative of n_f and n_g over (a, b, c, d).
+struct PairNormals {
+  Vec3 nf, ng;
+  double af, ag;
+  Eigen::Matrix<double, 3, 12> Jf, Jg;
+};
+PairNormals pair_normals(const MatX3d& X, const MatX3i& F, const FacePair& p) {
+  PairNormals r;
+  const UnitNormal nf = unit_normal(X, F(p.f, 0), F(p.f, 1), F(p.f, 2));
+  const UnitNormal ng = unit_normal(X, p.b, p.a, p.d);
+  Eigen::Matrix<double, 3, 9> dnf;
+  for (int k = 0; k < 3; ++k) {
+    int id = F(p.f, k);
+    int slot = id == p.a ? 0 : id == p.b ? 1 : 2;
+    dnf.block<3, 3>(0, 3 * slot) = nf.dn.block<3, 3>(0, 3 * k);
+  }
+  r.nf = nf.n;
+  r.ng = ng.n;
+  r.af = nf.area;
+  r.ag = ng.area;
+  r.Jf = pair_jac_f(dnf);
+  r.Jg = pair_jac_g(ng.dn);
+  return r;
+}
+}  // namespace
+
+double complexity_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
+                         Eigen::VectorXd* grad, HessianSink* hess) {
+  // Face areas and the sum of neighbour areas per face (Eq. 9).
+  std::vector<double> area(F.rows()), nsum(F.rows(), 0.0);
+  double total = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    area[f] = area_normal(X, F(f, 0), F(f, 1), F(f, 2)).norm();
+    total += area[f];
+  }
+  for (const FacePair& p : pairs) {
+    nsum[p.f] += area[p.g];
+    nsum[p.g] += area[p.f];
+  }
+  double E = 0;
+  for (const FacePair& p : pairs) {
+    const int v[4] = {p.a, p.b, p.c, p.d};
+    const double gfg = nsum[p.f] > 0 ? area[p.g] / nsum[p.f] : 0, ggf = nsum[p.g] > 0 ? area[p.f] / nsum[p.g] : 0;
+    const double Ae = (gfg * area[p.f] + ggf * area[p.g]) / total;
+    const PairNormals pn = pair_normals(X, F, p);
+    const Vec3 r = pn.nf - pn.ng;
+    E += Ae * r.squaredNorm();
+    if (!grad && !hess) continue;
+    const Eigen::Matrix<double, 3, 12> Jr = pn.Jf - pn.Jg;
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(2 * weight * Ae * Jr.transpose() * r));
+    if (hess) hess->add(v, 4, 2 * weight * Ae * Jr.transpose() * Jr);
+  }
+  return weight * E;
+}
+
+double edge_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs,
+                   const std::vector<EdgeConstraint>& edges, double weight, Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (const EdgeConstraint& e : edges) {
+    const FacePair& p = pairs[e.pair];
+    const int v[4] = {p.a, p.b, p.c, p.d};
+    const PairNormals pn = pair_normals(X, F, p);
+    const double r = pn.nf.dot(pn.ng) - (e.sharp ? 0.0 : 1.0);
+    E += e.omega * r * r;
+    if (!grad && !hess) continue;
+    const Eigen::Matrix<double, 1, 12> dr = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(2 * weight * e.omega * r * dr.transpose()));
+    if (hess) hess->add(v, 4, 2 * weight * e.omega * dr.transpose() * dr);
+  }
+  return weight * E;
+}
+
+double area_constraint(const MatX3d& X, const MatX3i& F, double area0, Eigen::VectorXd* grad) {
+  double A = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
+    const Vec3 xa = row(X, v[0]), xb = row(X, v[1]), xc = row(X, v[2]);
+    const Vec3 N = 0.5 * (xb - xa).cross(xc - xa);
+    const double a = N.norm();
+    A += a;
+    if (grad && a > 0)
+      scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(normal_jacobian(xa, xb, xc).transpose() * (N / a)));
+  }
+  return A - area0;
+}
+
+}  // namespace polycube::deform

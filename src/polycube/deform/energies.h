@@ -1,0 +1,89 @@
+// Energies of the l1 polycube deformation (Huang et al. 2014, Sections 2-3), each with an analytic
+// gradient and a symmetric positive semi-definite Hessian approximation.
+//
+// Positions X are #V x 3 (row-major), so the degree of freedom of coordinate k of vertex v is 3v+k.
+// Every function adds weight * (its term) to `grad` and `hess` when they are non-null and returns
+// weight * value. Hessians are handed over per element through HessianSink.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::deform {
+
+/// Receives symmetric element Hessians: `H` is (3 nv) x (3 nv) over the vertices v[0..nv).
+class HessianSink {
+ public:
+  virtual ~HessianSink() = default;
+  virtual void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) = 0;
+};
+
+/// Dense sink for tests and small problems.
+class DenseHessian : public HessianSink {
+ public:
+  explicit DenseHessian(int nvertices) : H(Eigen::MatrixXd::Zero(3 * nvertices, 3 * nvertices)) {}
+  void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& h) override;
+  Eigen::MatrixXd H;
+};
+
+/// Two boundary triangles sharing an edge: f = (a, b, c), g contains b, a; c and d are the
+/// vertices opposite the shared edge in f and g.
+struct FacePair {
+  int f, g;
+  int a, b, c, d;
+};
+
+/// Adjacent boundary-triangle pairs of a closed oriented triangle set.
+std::vector<FacePair> face_pairs(const MatX3i& F);
+
+/// Area-weighted normal of triangle (a, b, c): N = (b - a) x (c - a) / 2; |N| is the area.
+Vec3 area_normal(const MatX3d& X, int a, int b, int c);
+
+/// Smoothed l1 energy (Eq. 2 with |c| ~ sqrt(c^2 + eps), Eqs. 4-5):
+///   sum_f A_f sum_k sqrt(n_fk^2 + eps) = sum_f sum_k sqrt(N_fk^2 + eps |N_f|^2).
+/// Hessian: exact per triangle, projected to PSD by clamping its eigenvalues (unless `project` is
+/// false, which gives the exact Hessian, for tests).
+double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad, HessianSink* hess,
+                 bool project = true);
+
+/// Exact (non-smoothed) l1 energy sum_f |N_f|_1 and total area sum_f |N_f|.
+void l1_measure(const MatX3d& X, const MatX3i& F, double& l1, double& area);
+
+/// Precomputed rest-state data for ARAP.
+struct ArapRest {
+  std::vector<Eigen::Matrix3d> Dm_inv;  ///< inverse rest edge matrix per tet
+  std::vector<double> w;                ///< rest volume / total rest volume
+  static ArapRest build(const MatX3d& X_rest, const MatX4i& T);
+};
+
+/// Volumetric ARAP distortion (Eqs. 6-7): sum_t w_t * 0.5 |F_t - polar(F_t)|_F^2.
+/// Gradient exact; Hessian G^T G (constant, PSD). `per_tet` optionally receives each delta_t.
+double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
+                   HessianSink* hess, std::vector<double>* per_tet = nullptr);
+
+/// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
+/// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
+double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
+                      Eigen::VectorXd* grad, HessianSink* hess);
+
+/// Complexity penalty (Eqs. 8-10): sum_pairs A_e |n_f - n_g|^2 / A_total with the gamma-weighted
+/// edge areas of Eq. 9 (held constant in the derivatives). Hessian: Gauss-Newton.
+double complexity_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
+                         Eigen::VectorXd* grad, HessianSink* hess);
+
+/// A user edge constraint (Eqs. 12-13) on pair `pair`: sharp wants n_f . n_g = 0, flat wants 1.
+struct EdgeConstraint {
+  int pair;
+  bool sharp;
+  double omega;
+};
+/// sum omega (n_f . n_g - target)^2. Hessian: Gauss-Newton.
+double edge_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs,
+                   const std::vector<EdgeConstraint>& edges, double weight, Eigen::VectorXd* grad, HessianSink* hess);
+
+/// Area constraint C(X) = sum_f |N_f| - area0 (Eq. 2) and its gradient.
+double area_constraint(const MatX3d& X, const MatX3i& F, double area0, Eigen::VectorXd* grad);
+
+}  // namespace polycube::deform
