@@ -3,6 +3,7 @@
 #include <gmsh.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -73,7 +74,8 @@ void write_medit(const std::string& path, const MeshData& m) {
   f.close();
 }
 
-void write_vtk(const std::string& path, const MeshData& m, bool binary, const CellFields& fields) {
+void write_vtk(const std::string& path, const MeshData& m, bool binary, const CellFields& fields,
+               const CellVectors& vectors) {
   File f(path, binary ? "wb" : "w");
   const long nc = (long)(m.F.rows() + m.Q.rows() + m.T.rows() + m.H.rows());
   const long size = (long)(4 * m.F.rows() + 5 * m.Q.rows() + 5 * m.T.rows() + 9 * m.H.rows());
@@ -114,8 +116,25 @@ void write_vtk(const std::string& path, const MeshData& m, bool binary, const Ce
   types((long)m.T.rows(), 10);
   types((long)m.H.rows(), 12);
   if (binary) std::fprintf(f.f, "\n");
+  for (auto& [name, v] : vectors)
+    POLYCUBE_ASSERT((long)v.rows() == nc, "cell vectors '" + name + "' size does not match the cell count");
+  if (!fields.empty() || !vectors.empty()) std::fprintf(f.f, "CELL_DATA %ld\n", nc);
+  for (auto& [name, v] : vectors) {
+    std::fprintf(f.f, "VECTORS %s double\n", name.c_str());
+    for (int i = 0; i < v.rows(); ++i) {
+      if (binary) for (int k = 0; k < 3; ++k) put_be<double>(f.f, v(i, k));
+      else std::fprintf(f.f, "%.9g %.9g %.9g\n", v(i, 0), v(i, 1), v(i, 2));
+    }
+    if (binary) std::fprintf(f.f, "\n");
+    // COLOR_SCALARS are unsigned bytes in binary files and floats in [0,1] in ASCII ones.
+    std::fprintf(f.f, "COLOR_SCALARS %s_rgb 3\n", name.c_str());
+    for (int i = 0; i < v.rows(); ++i) {
+      if (binary) for (int k = 0; k < 3; ++k) std::fputc(static_cast<int>(std::min(1.0, std::abs(v(i, k))) * 255 + 0.5), f.f);
+      else std::fprintf(f.f, "%.4f %.4f %.4f\n", std::min(1.0, std::abs(v(i, 0))), std::min(1.0, std::abs(v(i, 1))), std::min(1.0, std::abs(v(i, 2))));
+    }
+    if (binary) std::fprintf(f.f, "\n");
+  }
   if (!fields.empty()) {
-    std::fprintf(f.f, "CELL_DATA %ld\n", nc);
     for (auto& [name, v] : fields) {
       std::fprintf(f.f, "SCALARS %s int 1\nLOOKUP_TABLE default\n", name.c_str());
       for (int x : v) {

@@ -28,20 +28,21 @@ const char* to_string(Stage s) {
   return "?";
 }
 
-Stage last_available_stage() { return Stage::Tet; }
+Stage last_available_stage() { return Stage::Deform; }
 
 Stage parse_stage(const std::string& name) {
   for (Stage s : {Stage::Load, Stage::Tet, Stage::Deform, Stage::Polycube, Stage::Hex, Stage::Quad})
     if (name == to_string(s)) {
       if (static_cast<int>(s) > static_cast<int>(last_available_stage()))
-        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet)");
+        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform)");
       return s;
     }
   throw Error(ErrorKind::Usage, "unknown stage '" + name + "' (stages: load, tet, deform, polycube, hex, quad)");
 }
 
 const std::vector<std::string>& output_files() {
-  static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk"};
+  static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk",
+                                             "deformed.mesh", "deformed.vtk"};
   return f;
 }
 
@@ -260,6 +261,55 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       hooks.info("tet mesh: " + std::to_string(tm.V.rows()) + " vertices, " + std::to_string(tm.T.rows()) +
                  " tets, min dihedral " + std::to_string(tj["min_dihedral_deg"].get<double>()) + " deg");
       hooks.report("tet", 1);
+    }
+
+    // ---- deform -------------------------------------------------------------------------
+    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform)) {
+      Stopwatch sd;
+      hooks.report("deform", 0);
+      hooks.info("deforming towards a polycube (" + std::to_string(tm.T.rows()) + " tets)");
+      deform::DeformResult dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, opt.deform, hooks);
+      json pj = {{"l1_quality", dr.l1_quality},
+                 {"error_d", dr.error_d},
+                 {"arap_distortion", dr.arap},
+                 {"iterations", dr.iterations},
+                 {"alpha_steps", dr.alpha_steps},
+                 {"inverted_tets", dr.inverted},
+                 {"converged", dr.converged},
+                 {"seconds", dr.seconds}};
+      pj["rotation"] = json::array();
+      for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
+      json hist = json::array();
+      for (const auto& h : dr.history)
+        hist.push_back({{"alpha_step", h.alpha_step}, {"iteration", h.iteration}, {"alpha", h.alpha}, {"eps", h.eps},
+                        {"e1", h.e1}, {"e_arap", h.e_arap}, {"error_d", h.error_d}, {"l1_quality", h.l1_quality},
+                        {"step", h.step}, {"seconds", h.seconds}});
+      pj["history"] = hist;
+      pj["options"] = {{"alpha0", opt.deform.alpha0}, {"eps0", opt.deform.eps0}, {"eps_min", opt.deform.eps_min},
+                       {"beta", opt.deform.beta}, {"barrier_weight", opt.deform.barrier_weight},
+                       {"max_alpha_steps", opt.deform.max_alpha_steps},
+                       {"max_inner_iterations", opt.deform.max_inner_iterations},
+                       {"target_quality", opt.deform.target_quality}};
+      report["polycube"] = pj;
+      if (dr.inverted > 0)
+        throw Error(ErrorKind::Internal, "the deformation produced " + std::to_string(dr.inverted) + " inverted tets");
+      MeshData dm;
+      dm.V = dr.X;
+      dm.F = tm.boundary;
+      dm.T = tm.T;
+      MatX3d normals = MatX3d::Zero(dm.F.rows() + dm.T.rows(), 3);
+      for (int f = 0; f < dm.F.rows(); ++f)
+        normals.row(f) = deform::area_normal(dm.V, dm.F(f, 0), dm.F(f, 1), dm.F(f, 2)).normalized().transpose();
+      io::write_medit(stage_path("deformed.mesh"), dm);
+      io::write_vtk(stage_path("deformed.vtk"), dm, opt.vtk_binary, {}, {{"normal", normals}});
+      report["timings"]["deform"] = sd.seconds();
+      hooks.info("polycube deformation: l1_quality " + std::to_string(dr.l1_quality) + ", ARAP " +
+                 std::to_string(dr.arap) + ", " + std::to_string(dr.iterations) + " iterations, " +
+                 std::to_string(dr.seconds) + " s" + (dr.converged ? "" : " (target not reached)"));
+      if (!dr.converged)
+        hooks.warn("l1_quality " + std::to_string(dr.l1_quality) + " is above the target " +
+                   std::to_string(opt.deform.target_quality));
+      hooks.report("deform", 1);
     }
 
     // ---- publish ------------------------------------------------------------------------

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "polycube/core/log.h"
+#include "polycube/deform/solver.h"
 #include "polycube/io/readers.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
@@ -34,6 +35,7 @@ struct PipelineOptions {
   io::CadOptions cad;
   ValidateOptions validate;
   TetOptions tet;
+  deform::DeformOptions deform;
 };
 
 /// Names of every file the pipeline may write into the output folder.

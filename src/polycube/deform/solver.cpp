@@ -1,0 +1,290 @@
+#include "polycube/deform/solver.h"
+
+#include <Eigen/SVD>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "polycube/core/error.h"
+#include "polycube/deform/sparse_system.h"
+#include "polycube/validate/tetmesh.h"
+
+namespace polycube::deform {
+
+namespace {
+
+Eigen::Matrix3d skew(const Vec3& w) {
+  Eigen::Matrix3d S;
+  S << 0, -w.z(), w.y(), w.z(), 0, -w.x(), -w.y(), w.x(), 0;
+  return S;
+}
+
+Eigen::Matrix3d exp_rotation(const Vec3& w) {
+  const double th = w.norm();
+  if (th < 1e-300) return Eigen::Matrix3d::Identity();
+  return Eigen::AngleAxisd(th, w / th).toRotationMatrix();
+}
+
+Eigen::Matrix3d closest_rotation(const Eigen::Matrix3d& M) {
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(M, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU();
+  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1;
+  return U * svd.matrixV().transpose();
+}
+
+// Smoothed l1 of a set of area normals: sum_f sum_k sqrt(N_k^2 + eps |N|^2), with gradient and
+// Gauss-Newton Hessian with respect to an infinitesimal rotation w (N -> N + w x N).
+double rotation_objective(const std::vector<Vec3>& N, double eps, Vec3* grad, Eigen::Matrix3d* hess) {
+  double h = 0;
+  if (grad) grad->setZero();
+  if (hess) hess->setZero();
+  for (const Vec3& n : N) {
+    const double n2 = n.squaredNorm();
+    Vec3 dg = Vec3::Zero();
+    Eigen::Matrix3d Hg = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 3; ++k) {
+      const double s = std::sqrt(n[k] * n[k] + eps * n2);
+      h += s;
+      if (s <= 0 || (!grad && !hess)) continue;
+      Vec3 q = eps * n;
+      q[k] += n[k];
+      dg += q / s;
+      Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
+      M(k, k) += 1;
+      Hg += M / s - q * q.transpose() / (s * s * s);
+    }
+    if (grad) *grad += n.cross(dg);  // d/dw g(N + w x N) = N x dg
+    if (hess) {
+      const Eigen::Matrix3d Jn = -skew(n);  // d(w x N)/dw = -[N]x
+      *hess += Jn.transpose() * Hg * Jn;
+    }
+  }
+  return h;
+}
+
+struct Problem {
+  const MatX4i& T;
+  const MatX3i& B;
+  std::vector<FacePair> pairs;
+  ArapRest rest;
+  double area0 = 1;
+  const DeformOptions& opt;
+};
+
+struct Energies {
+  double total = 0, e1 = 0, arap = 0, barrier = 0, complexity = 0, edges = 0;
+};
+
+Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, Eigen::VectorXd* g, HessianSink* H,
+                  bool with_arap_hessian) {
+  Energies e;
+  e.barrier = barrier_energy(X, p.B, p.pairs, p.opt.barrier_weight / std::max<size_t>(1, p.pairs.size()), g, H);
+  if (!std::isfinite(e.barrier)) {
+    e.total = std::numeric_limits<double>::infinity();
+    return e;
+  }
+  e.e1 = l1_energy(X, p.B, eps, alpha / p.area0, g, H);
+  e.arap = arap_energy(X, p.T, p.rest, 1.0, g, with_arap_hessian ? H : nullptr);
+  if (p.opt.beta > 0) e.complexity = complexity_energy(X, p.B, p.pairs, p.opt.beta, g, H);
+  if (!p.opt.edges.empty()) e.edges = edge_energy(X, p.B, p.pairs, p.opt.edges, 1.0, g, H);
+  e.total = e.e1 + e.arap + e.barrier + e.complexity + e.edges;
+  return e;
+}
+
+bool any_inverted(const MatX3d& X, const MatX4i& T) {
+  for (int t = 0; t < T.rows(); ++t) {
+    const Vec3 a = X.row(T(t, 0)), b = X.row(T(t, 1)), c = X.row(T(t, 2)), d = X.row(T(t, 3));
+    if ((b - a).dot((c - a).cross(d - a)) <= 0) return true;
+  }
+  return false;
+}
+
+// Scales X about its boundary centroid so that the boundary area is area0 (the constraint C = 0).
+void restore_area(MatX3d& X, const MatX3i& B, double area0) {
+  double l1, a;
+  l1_measure(X, B, l1, a);
+  const Eigen::RowVector3d c = X.colwise().mean();
+  X = ((X.rowwise() - c) * std::sqrt(area0 / a)).rowwise() + c;
+}
+
+}  // namespace
+
+Eigen::Matrix3d best_rotation(const MatX3d& X, const MatX3i& B, double eps) {
+  std::vector<Vec3> N(B.rows());
+  for (int f = 0; f < B.rows(); ++f) N[f] = area_normal(X, B(f, 0), B(f, 1), B(f, 2));
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  std::vector<Vec3> cur = N;
+  double h = rotation_objective(cur, eps, nullptr, nullptr);
+  for (int it = 0; it < 20; ++it) {
+    Vec3 g;
+    Eigen::Matrix3d H;
+    rotation_objective(cur, eps, &g, &H);
+    const double scale = std::max(1e-12, H.trace() / 3);
+    Vec3 w = -(H + 1e-9 * scale * Eigen::Matrix3d::Identity()).ldlt().solve(g);
+    bool improved = false;
+    for (int ls = 0; ls < 30 && !improved; ++ls, w *= 0.5) {
+      const Eigen::Matrix3d dR = exp_rotation(w);
+      std::vector<Vec3> trial(N.size());
+      for (size_t f = 0; f < N.size(); ++f) trial[f] = dR * cur[f];
+      const double ht = rotation_objective(trial, eps, nullptr, nullptr);
+      if (ht < h - 1e-14 * std::abs(h)) {
+        h = ht;
+        cur.swap(trial);
+        R = dR * R;
+        improved = true;
+      }
+    }
+    if (!improved || w.norm() < 1e-10) break;
+  }
+  return closest_rotation(R);
+}
+
+DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
+                                const Hooks& hooks) {
+  Stopwatch clock;
+  DeformResult res;
+  // Normalize: centred, unit bounding-box diagonal.
+  const Eigen::RowVector3d centre = V.colwise().mean();
+  const double scale = (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
+  POLYCUBE_ASSERT(scale > 0, "empty or flat mesh");
+  MatX3d X = (V.rowwise() - centre) / scale;
+  POLYCUBE_ASSERT(!any_inverted(X, T), "the tet mesh given to the deformation has inverted tets");
+
+  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt};
+  double l1 = 0;
+  l1_measure(X, B, l1, p.area0);
+  for (const EdgeConstraint& e : opt.edges)
+    POLYCUBE_ASSERT(e.pair >= 0 && e.pair < static_cast<int>(p.pairs.size()), "edge constraint out of range");
+
+  // Sparsity: tets and the 4 vertices of each adjacent boundary pair.
+  std::vector<std::vector<int>> elements;
+  elements.reserve(T.rows() + p.pairs.size());
+  for (int t = 0; t < T.rows(); ++t) elements.push_back({T(t, 0), T(t, 1), T(t, 2), T(t, 3)});
+  for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
+  SparseSystem sys(static_cast<int>(X.rows()), elements);
+  // The ARAP Hessian G^T G is constant: assemble it once.
+  sys.set_zero();
+  arap_energy(X, T, p.rest, 1.0, nullptr, &sys);
+  const std::vector<double> arap_values = sys.values();
+  const double arap_diag = sys.mean_diagonal();
+
+  auto quality = [&](const MatX3d& Y) {
+    double a, s;
+    l1_measure(Y, B, s, a);
+    return s / a - 1.0;
+  };
+
+  double alpha = opt.alpha0, eps = opt.eps0;
+  Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
+  int total_iterations = 0;
+  double q = quality(X);
+  for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality; ++step) {
+    res.alpha_steps = step + 1;
+    const double d0 = q;
+    std::vector<double> changes;
+    double d_prev = q;
+    double mu = 1e-8 * arap_diag;
+    for (int it = 0; it < opt.max_inner_iterations; ++it) {
+      if (opt.global_rotation) {
+        const Eigen::Matrix3d R = best_rotation(X, B, eps);
+        const Eigen::RowVector3d c = X.colwise().mean();
+        X = ((X.rowwise() - c) * R.transpose()).rowwise() + c;
+        R_total = closest_rotation(R * R_total);
+      }
+      // Gradient and Hessian approximation of the merit energy; constraint and its gradient.
+      Eigen::VectorXd g = Eigen::VectorXd::Zero(X.size());
+      sys.values() = arap_values;
+      const Energies e0 = evaluate(p, X, alpha, eps, &g, &sys, false);
+      Eigen::VectorXd gc = Eigen::VectorXd::Zero(X.size());
+      const double C = area_constraint(X, B, p.area0, &gc);
+      const std::vector<double> assembled = sys.values();
+      bool ok = false;
+      for (int tries = 0; tries < 8 && !ok; ++tries) {
+        sys.values() = assembled;
+        sys.add_diagonal(mu);
+        ok = sys.factorize();
+        if (!ok) mu *= 100;
+      }
+      if (!ok) throw Error(ErrorKind::Internal, "SQP system could not be factorized");
+      // Schur complement of the KKT system (Eq. 16).
+      const Eigen::VectorXd Hg = sys.solve(g);
+      const Eigen::VectorXd Hc = sys.solve(gc);
+      const double lambda = (-gc.dot(Hg) + C) / gc.dot(Hc);
+      const Eigen::VectorXd dx = -Hg - lambda * Hc;
+      const Eigen::Map<const MatX3d> D(dx.data(), X.rows(), 3);
+      // Backtracking: no inverted tet, finite barrier, decrease of the energy on the constraint.
+      double t = 1.0, accepted = 0;
+      MatX3d Xt;
+      for (int ls = 0; ls < 40; ++ls, t *= 0.5) {
+        Xt = X + t * D;
+        restore_area(Xt, B, p.area0);
+        if (any_inverted(Xt, T)) continue;
+        const Energies et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
+        if (et.total < e0.total) {
+          accepted = t;
+          break;
+        }
+      }
+      ++total_iterations;
+      if (accepted == 0) {
+        // No progress along the SQP direction: stronger damping, or stop this schedule step.
+        mu *= 10;
+        if (mu > 1e3 * arap_diag) break;
+        continue;
+      }
+      mu = std::max(1e-8 * arap_diag, mu * 0.3);
+      const double move = (Xt - X).rowwise().norm().maxCoeff();
+      X = Xt;
+      q = quality(X);
+      IterationRecord r;
+      r.alpha_step = step;
+      r.iteration = total_iterations;
+      r.alpha = alpha;
+      r.eps = eps;
+      double s1, a1;
+      l1_measure(X, B, s1, a1);
+      r.e1 = s1 / p.area0;
+      r.e_arap = arap_energy(X, T, p.rest, 1.0, nullptr, nullptr);
+      r.error_d = (s1 - p.area0) * scale * scale;
+      r.l1_quality = q;
+      r.step = accepted;
+      r.seconds = clock.seconds();
+      res.history.push_back(r);
+      hooks.report("deform", std::min(1.0, std::log(std::max(q, 1e-12) / std::max(d0, 1e-12)) /
+                                               std::log(opt.target_quality / std::max(d0, 1e-12))));
+      // Paper's test: the error stopped decreasing (last five changes sum < d0 / 100), or SQP converged.
+      changes.push_back(std::abs(q - d_prev));
+      d_prev = q;
+      if (changes.size() >= 5) {
+        double sum = 0;
+        for (size_t k = changes.size() - 5; k < changes.size(); ++k) sum += changes[k];
+        if (sum < d0 / 100) break;
+      }
+      if (move < 1e-9 || q < opt.target_quality) break;
+    }
+    {
+      std::ostringstream os;
+      os << "schedule step " << step + 1 << ": alpha " << alpha << ", eps " << eps << ", l1_quality " << q
+         << ", iterations " << total_iterations;
+      hooks.debug(os.str());
+    }
+    alpha *= opt.alpha_factor;
+    eps = std::max(opt.eps_min, eps / opt.eps_factor);
+  }
+  // Back to input units, centred where the input was.
+  const Eigen::RowVector3d c = X.colwise().mean();
+  res.X = ((X.rowwise() - c) * scale).rowwise() + centre;
+  res.rotation = R_total;
+  res.l1_quality = quality(X);
+  double s1, a1;
+  l1_measure(X, B, s1, a1);
+  res.error_d = (s1 - p.area0) * scale * scale;
+  res.arap = arap_energy(X, T, p.rest, 1.0, nullptr, nullptr);
+  res.iterations = total_iterations;
+  res.inverted = measure_tets(res.X, T).inverted;
+  res.converged = res.l1_quality < opt.target_quality;
+  res.seconds = clock.seconds();
+  return res;
+}
+
+}  // namespace polycube::deform

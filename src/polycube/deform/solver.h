@@ -1,0 +1,66 @@
+// The l1 polycube deformation (Huang et al. 2014, Section 4): minimize
+//   alpha E1 + E_delta + beta E_eta + E_e + barrier   subject to   total boundary area = const,
+// by SQP steps (Eqs. 15-16, Schur complement, sparse Cholesky with the symbolic analysis reused),
+// a global rotation re-solved at every step, and the alpha/epsilon schedule of Section 4.
+//
+// Internally the mesh is centred and scaled to a unit bounding-box diagonal and E1, E_eta are
+// divided by the boundary area, so that every weight below is independent of the input's units.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "polycube/core/log.h"
+#include "polycube/core/types.h"
+#include "polycube/deform/energies.h"
+
+namespace polycube::deform {
+
+struct DeformOptions {
+  double alpha0 = 0.05;         ///< initial weight of E1 (authors' code; the paper says 0.1)
+  double alpha_factor = 2.0;    ///< alpha is multiplied by this at each schedule step
+  double eps0 = 0.5;            ///< initial smoothing of |c| ~ sqrt(c^2 + eps) (authors' code; paper: 1)
+  double eps_factor = 1.41421356237309515;  ///< eps is divided by this at each step...
+  double eps_min = 0.01;        ///< ...but never below this
+  double beta = 0.0;            ///< weight of the complexity penalty E_eta (Eq. 10); larger = fewer corners
+  double barrier_weight = 0.01; ///< weight of the anti-foldover log barrier (Eq. 11), per edge / #edges
+  int max_alpha_steps = 20;     ///< schedule steps (alpha doublings) at most
+  int max_inner_iterations = 100;  ///< SQP iterations per schedule step at most
+  double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this
+  bool global_rotation = true;  ///< re-solve the best global rotation (Eq. 3) at every SQP step
+  std::vector<EdgeConstraint> edges;  ///< user edge terms (Eqs. 12-13), on face_pairs(boundary)
+};
+
+/// One SQP iteration, for convergence plots like the paper's Fig. 3.
+struct IterationRecord {
+  int alpha_step = 0, iteration = 0;
+  double alpha = 0, eps = 0;
+  double e1 = 0;          ///< sum_f |N_f|_1 / boundary area (1 for a polycube)
+  double e_arap = 0;      ///< E_delta
+  double error_d = 0;     ///< Eq. 1 in input units (area)
+  double l1_quality = 0;  ///< sum|N|_1 / sum|N|_2 - 1
+  double step = 0;        ///< accepted line-search step length
+  double seconds = 0;     ///< since the start of the deformation
+};
+
+struct DeformResult {
+  MatX3d X;                  ///< deformed positions, input units, centred where the input was
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();  ///< global rotation applied (deformed = R * input-ish)
+  double l1_quality = 0;     ///< sum|N|_1 / sum|N|_2 - 1 at the end
+  double error_d = 0;        ///< Eq. 1, input units
+  double arap = 0;           ///< E_delta at the end
+  int iterations = 0, alpha_steps = 0, inverted = 0;
+  bool converged = false;    ///< l1_quality reached target_quality
+  double seconds = 0;
+  std::vector<IterationRecord> history;
+};
+
+/// Deforms the tet mesh (V, T) with boundary triangles B (outward) towards a polycube.
+/// Throws Error(Internal) if the input has inverted tets.
+DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
+                                const Hooks& hooks = {});
+
+/// The rotation R minimizing the smoothed l1 norm of R n over the boundary normals (Eq. 3),
+/// found by Newton steps on the rotation vector. Returns the identity if nothing improves.
+Eigen::Matrix3d best_rotation(const MatX3d& X, const MatX3i& B, double eps);
+
+}  // namespace polycube::deform

@@ -1,0 +1,85 @@
+#include "polycube/deform/sparse_system.h"
+
+#include <algorithm>
+
+#include "polycube/core/error.h"
+
+namespace polycube::deform {
+
+SparseSystem::SparseSystem(int n, const std::vector<std::vector<int>>& elements) : n_(n), lower_(n) {
+  for (const auto& e : elements)
+    for (int a : e)
+      for (int b : e)
+        if (a < b) lower_[b].push_back(a);
+  for (auto& l : lower_) {
+    std::sort(l.begin(), l.end());
+    l.erase(std::unique(l.begin(), l.end()), l.end());
+  }
+  // CSC upper triangle: column 3vj+b holds rows of lower neighbours (3 each) then 3vj..3vj+b.
+  std::vector<int> outer(3 * n + 1, 0), inner;
+  for (int vj = 0; vj < n; ++vj)
+    for (int b = 0; b < 3; ++b) {
+      for (int vi : lower_[vj])
+        for (int a = 0; a < 3; ++a) inner.push_back(3 * vi + a);
+      for (int a = 0; a <= b; ++a) inner.push_back(3 * vj + a);
+      outer[3 * vj + b + 1] = static_cast<int>(inner.size());
+    }
+  values_.assign(inner.size(), 0.0);
+  A_ = Eigen::SparseMatrix<double>(3 * n, 3 * n);
+  A_.resizeNonZeros(static_cast<Eigen::Index>(inner.size()));
+  std::copy(outer.begin(), outer.end(), A_.outerIndexPtr());
+  std::copy(inner.begin(), inner.end(), A_.innerIndexPtr());
+  diag_.resize(3 * n);
+  for (int c = 0; c < 3 * n; ++c) diag_[c] = outer[c + 1] - 1;
+}
+
+int SparseSystem::position(int vi, int vj, int a, int b) const {
+  const int col = 3 * vj + b;
+  const int start = A_.outerIndexPtr()[col];
+  if (vi == vj) return start + 3 * static_cast<int>(lower_[vj].size()) + a;
+  const auto& l = lower_[vj];
+  const int rank = static_cast<int>(std::lower_bound(l.begin(), l.end(), vi) - l.begin());
+  return start + 3 * rank + a;
+}
+
+void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) {
+  for (int p = 0; p < nv; ++p)
+    for (int q = 0; q < nv; ++q) {
+      const int vi = v[p], vj = v[q];
+      if (vi > vj) continue;
+      if (vi == vj && p != q) {
+        // Repeated vertex in an element: never happens for valid elements.
+        continue;
+      }
+      for (int b = 0; b < 3; ++b) {
+        int pos = position(vi, vj, 0, b);
+        const int amax = vi == vj ? b : 2;
+        for (int a = 0; a <= amax; ++a) values_[pos + a] += H(3 * p + a, 3 * q + b);
+      }
+    }
+}
+
+void SparseSystem::add_diagonal(double mu) {
+  for (int d : diag_) values_[d] += mu;
+}
+
+double SparseSystem::mean_diagonal() const {
+  double s = 0;
+  for (int d : diag_) s += values_[d];
+  return s / static_cast<double>(diag_.size());
+}
+
+bool SparseSystem::factorize() {
+  std::copy(values_.begin(), values_.end(), A_.valuePtr());
+  if (!analyzed_) {
+    llt_ = std::make_unique<Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper>>();
+    llt_->analyzePattern(A_);
+    analyzed_ = true;
+  }
+  llt_->factorize(A_);
+  return llt_->info() == Eigen::Success;
+}
+
+Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b) const { return llt_->solve(b); }
+
+}  // namespace polycube::deform

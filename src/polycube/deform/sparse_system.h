@@ -1,0 +1,43 @@
+// The sparse symmetric system of the SQP step: a fixed pattern (tet mesh adjacency plus the
+// vertices of adjacent boundary-triangle pairs), assembled in place from element Hessians, and
+// factorized with CHOLMOD (supernodal), the symbolic analysis done once per pattern.
+#pragma once
+#include <Eigen/CholmodSupport>
+#include <Eigen/Sparse>
+#include <memory>
+#include <vector>
+
+#include "polycube/deform/energies.h"
+
+namespace polycube::deform {
+
+class SparseSystem : public HessianSink {
+ public:
+  /// Pattern over `nvertices` vertices (3 DOF each) from element vertex lists.
+  SparseSystem(int nvertices, const std::vector<std::vector<int>>& elements);
+
+  void set_zero() { std::fill(values_.begin(), values_.end(), 0.0); }
+  /// Current values (upper triangle, CSC order); copy/restore for a constant part.
+  std::vector<double>& values() { return values_; }
+  void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override;
+  /// Adds mu to every diagonal entry.
+  void add_diagonal(double mu);
+  double mean_diagonal() const;
+
+  /// Numeric factorization (symbolic analysis on first call). False if not positive definite.
+  bool factorize();
+  Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
+  int dofs() const { return 3 * n_; }
+
+ private:
+  int position(int vi, int vj, int a, int b) const;  // vi <= vj
+  int n_;
+  std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
+  Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
+  std::vector<double> values_;
+  std::vector<int> diag_;
+  std::unique_ptr<Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper>> llt_;
+  bool analyzed_ = false;
+};
+
+}  // namespace polycube::deform
