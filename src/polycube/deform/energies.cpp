@@ -66,6 +66,26 @@ Eigen::Matrix<double, N, N> project_psd(const Eigen::Matrix<double, N, N>& H) {
 
 inline Vec3 row(const MatX3d& X, int i) { return X.row(i).transpose(); }
 
+// Rotation part of the polar decomposition of F (closest rotation, never a reflection). Closed-form
+// eigen-decomposition of F^T F in the common well-conditioned case, SVD otherwise.
+inline Eigen::Matrix3d closest_rotation(const Eigen::Matrix3d& F) {
+  if (F.determinant() > 0) {
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es;
+    es.computeDirect(F.transpose() * F);
+    const Vec3 l = es.eigenvalues();  // ascending
+    if (l[0] > 1e-8 * l[2]) {
+      const Eigen::Matrix3d& V = es.eigenvectors();
+      const Vec3 inv_s(1 / std::sqrt(l[0]), 1 / std::sqrt(l[1]), 1 / std::sqrt(l[2]));
+      const Eigen::Matrix3d R = F * V * inv_s.asDiagonal() * V.transpose();
+      if ((R.transpose() * R - Eigen::Matrix3d::Identity()).norm() < 1e-8) return R;
+    }
+  }
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(F, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU();
+  if ((U * svd.matrixV().transpose()).determinant() < 0) U.col(2) *= -1;
+  return U * svd.matrixV().transpose();
+}
+
 // Unit normal of a face and its derivative dn/dx (3 x 9).
 struct UnitNormal {
   Vec3 n;
@@ -182,10 +202,7 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
     for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
     const Eigen::Matrix3d& Di = rest.Dm_inv[t];
     const Eigen::Matrix3d Fm = Ds * Di;
-    Eigen::JacobiSVD<Eigen::Matrix3d> svd(Fm, Eigen::ComputeFullU | Eigen::ComputeFullV);
-    Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
-    if ((U * V.transpose()).determinant() < 0) U.col(2) *= -1;  // closest rotation, not reflection
-    const Eigen::Matrix3d R = U * V.transpose();
+    const Eigen::Matrix3d R = closest_rotation(Fm);
     const double delta = 0.5 * (Fm - R).squaredNorm();
     if (per_tet) (*per_tet)[t] = delta;
     E += rest.w[t] * delta;

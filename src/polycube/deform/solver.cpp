@@ -174,6 +174,8 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
     return s / a - 1.0;
   };
 
+  double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
+  int n_ls = 0;
   double alpha = opt.alpha0, eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
@@ -185,12 +187,15 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
     double d_prev = q;
     double mu = 1e-8 * arap_diag;
     for (int it = 0; it < opt.max_inner_iterations; ++it) {
+      Stopwatch sw_rot;
       if (opt.global_rotation) {
         const Eigen::Matrix3d R = best_rotation(X, B, eps);
         const Eigen::RowVector3d c = X.colwise().mean();
         X = ((X.rowwise() - c) * R.transpose()).rowwise() + c;
         R_total = closest_rotation(R * R_total);
       }
+      t_rot += sw_rot.seconds();
+      Stopwatch sw_asm;
       // Gradient and Hessian approximation of the merit energy; constraint and its gradient.
       Eigen::VectorXd g = Eigen::VectorXd::Zero(X.size());
       sys.values() = arap_values;
@@ -198,6 +203,8 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       Eigen::VectorXd gc = Eigen::VectorXd::Zero(X.size());
       const double C = area_constraint(X, B, p.area0, &gc);
       const std::vector<double> assembled = sys.values();
+      t_asm += sw_asm.seconds();
+      Stopwatch sw_fac;
       bool ok = false;
       for (int tries = 0; tries < 8 && !ok; ++tries) {
         sys.values() = assembled;
@@ -212,20 +219,25 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       const double lambda = (-gc.dot(Hg) + C) / gc.dot(Hc);
       const Eigen::VectorXd dx = -Hg - lambda * Hc;
       const Eigen::Map<const MatX3d> D(dx.data(), X.rows(), 3);
+      t_fac += sw_fac.seconds();
+      Stopwatch sw_ls;
       // Backtracking: no inverted tet, finite barrier, decrease of the energy on the constraint.
       double t = 1.0, accepted = 0;
       MatX3d Xt;
+      Energies et;
       for (int ls = 0; ls < 40; ++ls, t *= 0.5) {
         Xt = X + t * D;
         restore_area(Xt, B, p.area0);
         if (any_inverted(Xt, T)) continue;
-        const Energies et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
+        et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
+        ++n_ls;
         if (et.total < e0.total) {
           accepted = t;
           break;
         }
       }
       ++total_iterations;
+      t_ls += sw_ls.seconds();
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.
         mu *= 10;
@@ -244,7 +256,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       double s1, a1;
       l1_measure(X, B, s1, a1);
       r.e1 = s1 / p.area0;
-      r.e_arap = arap_energy(X, T, p.rest, 1.0, nullptr, nullptr);
+      r.e_arap = et.arap;
       r.error_d = (s1 - p.area0) * scale * scale;
       r.l1_quality = q;
       r.step = accepted;
@@ -270,6 +282,12 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
     }
     alpha *= opt.alpha_factor;
     eps = std::max(opt.eps_min, eps / opt.eps_factor);
+  }
+  {
+    std::ostringstream os;
+    os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
+       << " s, line search " << t_ls << " s (" << n_ls << " energy evaluations)";
+    hooks.debug(os.str());
   }
   // Back to input units, centred where the input was.
   const Eigen::RowVector3d c = X.colwise().mean();

@@ -1,6 +1,11 @@
 #include "polycube/deform/sparse_system.h"
 
+#include <dlfcn.h>
+
 #include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include "polycube/core/log.h"
 
 #include "polycube/core/error.h"
 
@@ -69,14 +74,35 @@ double SparseSystem::mean_diagonal() const {
   return s / static_cast<double>(diag_.size());
 }
 
+namespace {
+// OpenBLAS's worker threads spin (sched_yield) between the many small dense kernels of a supernodal
+// factorization, which costs more than it gains at our sizes: run BLAS single-threaded. Looked up
+// at run time so that any other BLAS works too.
+void single_threaded_blas() {
+  static bool done = false;
+  if (done) return;
+  done = true;
+  using SetThreads = void (*)(int);
+  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(1);
+  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "omp_set_num_threads"))) f(1);
+}
+}  // namespace
+
 bool SparseSystem::factorize() {
+  single_threaded_blas();
   std::copy(values_.begin(), values_.end(), A_.valuePtr());
   if (!analyzed_) {
-    llt_ = std::make_unique<Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper>>();
+    llt_ = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>>();
+    llt_->setMode(Eigen::CholmodAuto);
     llt_->analyzePattern(A_);
     analyzed_ = true;
   }
+  Stopwatch sw;
   llt_->factorize(A_);
+  if (std::getenv("PCDBG")) {
+    auto& c = llt_->cholmod();
+    std::fprintf(stderr, "factorize %.4f s, nnz(A) %ld, lnz %.0f, flops %.3g, supernodal %d\n", sw.seconds(), (long)A_.nonZeros(), c.lnz, c.fl, (int)(c.status));
+  }
   return llt_->info() == Eigen::Success;
 }
 

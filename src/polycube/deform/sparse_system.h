@@ -1,6 +1,7 @@
 // The sparse symmetric system of the SQP step: a fixed pattern (tet mesh adjacency plus the
 // vertices of adjacent boundary-triangle pairs), assembled in place from element Hessians, and
-// factorized with CHOLMOD (supernodal), the symbolic analysis done once per pattern.
+// factorized with CHOLMOD (supernodal or simplicial, chosen by CHOLMOD from the fill-in), the
+// symbolic analysis done once per pattern.
 #pragma once
 #include <Eigen/CholmodSupport>
 #include <Eigen/Sparse>
@@ -36,7 +37,7 @@ class SparseSystem : public HessianSink {
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
   std::vector<double> values_;
   std::vector<int> diag_;
-  std::unique_ptr<Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>, Eigen::Upper>> llt_;
+  std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>> llt_;
   bool analyzed_ = false;
 };
 
