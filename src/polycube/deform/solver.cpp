@@ -175,7 +175,8 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   };
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
-  int n_ls = 0;
+  int n_ls = 0, factorizations = 0, cg_iterations = 0;
+  bool factor_valid = false;
   double alpha = opt.alpha0, eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
@@ -186,6 +187,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
     std::vector<double> changes;
     double d_prev = q;
     double mu = 1e-8 * arap_diag;
+    factor_valid = false;  // alpha and eps changed: start the step with a fresh factorization
     for (int it = 0; it < opt.max_inner_iterations; ++it) {
       Stopwatch sw_rot;
       if (opt.global_rotation) {
@@ -205,17 +207,32 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       const std::vector<double> assembled = sys.values();
       t_asm += sw_asm.seconds();
       Stopwatch sw_fac;
-      bool ok = false;
-      for (int tries = 0; tries < 8 && !ok; ++tries) {
+      // The Hessian changes slowly within a schedule step: reuse the last factorization as a
+      // preconditioner for conjugate gradients, and factorize anew only when that gets slow.
+      Eigen::VectorXd Hg, Hc;
+      bool solved = false;
+      if (factor_valid) {
         sys.values() = assembled;
         sys.add_diagonal(mu);
-        ok = sys.factorize();
-        if (!ok) mu *= 100;
+        const int i1 = sys.solve_pcg(g, Hg, opt.cg_tolerance, opt.cg_max_iterations);
+        const int i2 = i1 > 0 ? sys.solve_pcg(gc, Hc, opt.cg_tolerance, opt.cg_max_iterations) : -1;
+        solved = i1 > 0 && i2 > 0;
+        if (solved) cg_iterations += i1 + i2;
       }
-      if (!ok) throw Error(ErrorKind::Internal, "SQP system could not be factorized");
-      // Schur complement of the KKT system (Eq. 16).
-      const Eigen::VectorXd Hg = sys.solve(g);
-      const Eigen::VectorXd Hc = sys.solve(gc);
+      if (!solved) {
+        bool ok = false;
+        for (int tries = 0; tries < 8 && !ok; ++tries) {
+          sys.values() = assembled;
+          sys.add_diagonal(mu);
+          ok = sys.factorize();
+          if (!ok) mu *= 100;
+        }
+        if (!ok) throw Error(ErrorKind::Internal, "SQP system could not be factorized");
+        ++factorizations;
+        factor_valid = true;
+        Hg = sys.solve(g);
+        Hc = sys.solve(gc);
+      }
       const double lambda = (-gc.dot(Hg) + C) / gc.dot(Hc);
       const Eigen::VectorXd dx = -Hg - lambda * Hc;
       const Eigen::Map<const MatX3d> D(dx.data(), X.rows(), 3);
@@ -241,9 +258,11 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.
         mu *= 10;
+        factor_valid = false;
         if (mu > 1e3 * arap_diag) break;
         continue;
       }
+      if (mu > 1e-8 * arap_diag) factor_valid = false;  // keep mu fixed while a factorization is reused
       mu = std::max(1e-8 * arap_diag, mu * 0.3);
       const double move = (Xt - X).rowwise().norm().maxCoeff();
       X = Xt;
@@ -286,7 +305,8 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   {
     std::ostringstream os;
     os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
-       << " s, line search " << t_ls << " s (" << n_ls << " energy evaluations)";
+       << " s, line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
+       << " factorizations, " << cg_iterations << " preconditioned CG iterations";
     hooks.debug(os.str());
   }
   // Back to input units, centred where the input was.
@@ -302,6 +322,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   res.inverted = measure_tets(res.X, T).inverted;
   res.converged = res.l1_quality < opt.target_quality;
   res.seconds = clock.seconds();
+  res.factorizations = factorizations;
   return res;
 }
 

@@ -28,6 +28,11 @@ struct DeformOptions {
   double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this
   bool global_rotation = true;  ///< re-solve the best global rotation (Eq. 3) at every SQP step
   std::vector<EdgeConstraint> edges;  ///< user edge terms (Eqs. 12-13), on face_pairs(boundary)
+  /// The SQP systems are solved by conjugate gradients preconditioned with the last Cholesky
+  /// factorization, to this relative residual; a new factorization is made at each schedule step
+  /// and whenever CG needs more than cg_max_iterations.
+  double cg_tolerance = 1e-3;
+  int cg_max_iterations = 12;
 };
 
 /// One SQP iteration, for convergence plots like the paper's Fig. 3.
@@ -49,6 +54,7 @@ struct DeformResult {
   double error_d = 0;        ///< Eq. 1, input units
   double arap = 0;           ///< E_delta at the end
   int iterations = 0, alpha_steps = 0, inverted = 0;
+  int factorizations = 0;    ///< sparse Cholesky factorizations made
   bool converged = false;    ///< l1_quality reached target_quality
   double seconds = 0;
   std::vector<IterationRecord> history;

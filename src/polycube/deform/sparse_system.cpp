@@ -94,6 +94,12 @@ bool SparseSystem::factorize() {
   if (!analyzed_) {
     llt_ = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>>();
     llt_->setMode(Eigen::CholmodAuto);
+    if (const char* o = std::getenv("PC_ORDER")) {
+      auto& c = llt_->cholmod();
+      c.nmethods = 1;
+      c.method[0].ordering = std::atoi(o);
+      c.postorder = 1;
+    }
     llt_->analyzePattern(A_);
     analyzed_ = true;
   }
@@ -101,11 +107,52 @@ bool SparseSystem::factorize() {
   llt_->factorize(A_);
   if (std::getenv("PCDBG")) {
     auto& c = llt_->cholmod();
-    std::fprintf(stderr, "factorize %.4f s, nnz(A) %ld, lnz %.0f, flops %.3g, supernodal %d\n", sw.seconds(), (long)A_.nonZeros(), c.lnz, c.fl, (int)(c.status));
+    std::fprintf(stderr, "factorize %.4f s, nnz(A) %ld, lnz %.0f, flops %.3g, ordering %d\n", sw.seconds(), (long)A_.nonZeros(), c.lnz, c.fl, c.method[c.selected].ordering);
   }
   return llt_->info() == Eigen::Success;
 }
 
 Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b) const { return llt_->solve(b); }
+
+Eigen::VectorXd SparseSystem::multiply(const Eigen::VectorXd& x) const {
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(x.size());
+  const int* outer = A_.outerIndexPtr();
+  const int* inner = A_.innerIndexPtr();
+  for (int c = 0; c < 3 * n_; ++c) {
+    double acc = 0;
+    const double xc = x[c];
+    for (int k = outer[c]; k < outer[c + 1]; ++k) {
+      const int r = inner[k];
+      const double v = values_[k];
+      acc += v * x[r];
+      if (r != c) y[r] += v * xc;
+    }
+    y[c] += acc;
+  }
+  return y;
+}
+
+int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter) const {
+  x = solve(b);
+  Eigen::VectorXd r = b - multiply(x);
+  const double bn = b.norm();
+  if (bn == 0 || r.norm() <= tol * bn) return 1;
+  Eigen::VectorXd z = solve(r), p = z;
+  double rz = r.dot(z);
+  for (int it = 1; it <= max_iter; ++it) {
+    const Eigen::VectorXd Ap = multiply(p);
+    const double pAp = p.dot(Ap);
+    if (!(pAp > 0)) return -1;
+    const double a = rz / pAp;
+    x += a * p;
+    r -= a * Ap;
+    if (r.norm() <= tol * bn) return it + 1;
+    z = solve(r);
+    const double rz_new = r.dot(z);
+    p = z + (rz_new / rz) * p;
+    rz = rz_new;
+  }
+  return -1;
+}
 
 }  // namespace polycube::deform

@@ -28,6 +28,12 @@ class SparseSystem : public HessianSink {
   /// Numeric factorization (symbolic analysis on first call). False if not positive definite.
   bool factorize();
   Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
+  /// y = A x with the current values (the factorization may be of older ones).
+  Eigen::VectorXd multiply(const Eigen::VectorXd& x) const;
+  /// Solves A x = b with the current values by conjugate gradients preconditioned with the last
+  /// factorization (exact in one step when it is of the current values). Returns the iterations
+  /// used, or -1 if the relative residual did not fall below `tol` within `max_iter`.
+  int solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter) const;
   int dofs() const { return 3 * n_; }
 
  private:
