@@ -158,9 +158,25 @@ double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Ei
     const Eigen::Matrix<double, 3, 9> J = normal_jacobian(xa, xb, xc);
     if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(weight * J.transpose() * dg));
     if (hess) {
-      Eigen::Matrix<double, 9, 9> H = J.transpose() * Hg * J + normal_second(dg);
-      H = 0.5 * (H + H.transpose());
-      if (project) H = project_psd<9>(H);
+      // Eq. 5: the first term J^T Hg J is PSD (g is convex in N); the second, sum_k dg_k d2N_k, is
+      // the indefinite C (x) [dg/2]x with C the cyclic 3x3 antisymmetric matrix. Its eigenvalues
+      // are +-(sqrt3/2)|dg| (twice each) and 0, and |C (x) S| = (sqrt3/2)|dg| P1 (x) Pw with P1, Pw
+      // the projectors orthogonal to (1,1,1) and to dg: the clamped (PSD) part is (H2 + |H2|) / 2.
+      Eigen::Matrix<double, 9, 9> H = J.transpose() * Hg * J;
+      const Eigen::Matrix<double, 9, 9> H2 = normal_second(dg);
+      if (project) {
+        const double w = dg.norm();
+        if (w > 0) {
+          const Eigen::Matrix3d P1 = Eigen::Matrix3d::Identity() - Eigen::Matrix3d::Constant(1.0 / 3);
+          const Eigen::Matrix3d Pw = Eigen::Matrix3d::Identity() - dg * dg.transpose() / (w * w);
+          Eigen::Matrix<double, 9, 9> A;
+          for (int p = 0; p < 3; ++p)
+            for (int q = 0; q < 3; ++q) A.block<3, 3>(3 * p, 3 * q) = P1(p, q) * Pw;
+          H += 0.5 * (H2 + (std::sqrt(3.0) / 2) * w * A);
+        }
+      } else {
+        H += H2;
+      }
       hess->add(v, 3, weight * H);
     }
   }

@@ -43,8 +43,8 @@ Vec3 area_normal(const MatX3d& X, int a, int b, int c);
 
 /// Smoothed l1 energy (Eq. 2 with |c| ~ sqrt(c^2 + eps), Eqs. 4-5):
 ///   sum_f A_f sum_k sqrt(n_fk^2 + eps) = sum_f sum_k sqrt(N_fk^2 + eps |N_f|^2).
-/// Hessian: exact per triangle, projected to PSD by clamping its eigenvalues (unless `project` is
-/// false, which gives the exact Hessian, for tests).
+/// Hessian: per triangle, the second term of Eq. 5 projected to PSD by clamping its eigenvalues
+/// (in closed form); `project` = false gives the exact Hessian, for tests.
 double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad, HessianSink* hess,
                  bool project = true);
 

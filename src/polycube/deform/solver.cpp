@@ -115,10 +115,11 @@ Eigen::Matrix3d best_rotation(const MatX3d& X, const MatX3i& B, double eps) {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   std::vector<Vec3> cur = N;
   double h = rotation_objective(cur, eps, nullptr, nullptr);
-  for (int it = 0; it < 20; ++it) {
+  for (int it = 0; it < 6; ++it) {
     Vec3 g;
     Eigen::Matrix3d H;
     rotation_objective(cur, eps, &g, &H);
+    if (g.norm() < 1e-9 * h) break;
     const double scale = std::max(1e-12, H.trace() / 3);
     Vec3 w = -(H + 1e-9 * scale * Eigen::Matrix3d::Identity()).ldlt().solve(g);
     bool improved = false;
