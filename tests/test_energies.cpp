@@ -139,6 +139,18 @@ TEST(Energies, ArapGradientHessianAndZeroAtRest) {
   EXPECT_NEAR(E(1.5 * s.X0, nullptr, nullptr), 0.7 * 0.5 * 3 * 0.25, 1e-12);
 }
 
+TEST(Energies, VolumeBarrierGradientAndPsd) {
+  Small s = small_mesh();
+  ArapRest rest = ArapRest::build(s.X0, s.T);
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return volume_barrier_energy(X, s.T, rest, 0.3, g, H);
+  };
+  expect_gradient(E, s.X);
+  expect_psd(hessian(E, s.X));
+  EXPECT_NEAR(E(s.X0, nullptr, nullptr), 0, 1e-14);
+  EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), -0.3 * std::log(8.0), 1e-12);
+}
+
 TEST(Energies, BarrierGradientAndPsd) {
   Small s = small_mesh();
   auto pairs = face_pairs(s.F);

@@ -241,6 +241,32 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
   return weight * E;
 }
 
+double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
+                             Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+    const Eigen::Matrix3d Fm = Ds * Di;
+    const double J = Fm.determinant();
+    if (!(J > 0)) return std::numeric_limits<double>::infinity();
+    E -= rest.w[t] * std::log(J);
+    if (!grad && !hess) continue;
+    // dJ/dF = cof(F) = J F^-T; dF/dx_p = (row p of B) as in arap_energy.
+    const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
+    Eigen::Matrix<double, 4, 3> B;
+    B.bottomRows<3>() = Di;
+    B.row(0) = -Di.colwise().sum();
+    Eigen::Matrix<double, 12, 1> dJ;
+    for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * rest.w[t] / J * dJ));
+    if (hess) hess->add(v, 4, weight * rest.w[t] / (J * J) * dJ * dJ.transpose());
+  }
+  return weight * E;
+}
+
 double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
                       Eigen::VectorXd* grad, HessianSink* hess) {
   double E = 0;

@@ -63,6 +63,12 @@ struct ArapRest {
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
                    HessianSink* hess, std::vector<double>* per_tet = nullptr);
 
+/// Volume barrier (not in the paper): sum_t w_t * -log(det F_t), w_t the rest volume fraction.
+/// Keeps every tet positively oriented so that the line search is never blocked by a tet that
+/// the SQP direction flattens. +inf for an inverted tet. Hessian: Gauss-Newton, (grad J grad J^T)/J^2.
+double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
+                             Eigen::VectorXd* grad, HessianSink* hess);
+
 /// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
 /// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
 double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,

@@ -2,6 +2,8 @@
 
 #include <Eigen/SVD>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <sstream>
 
@@ -72,7 +74,7 @@ struct Problem {
 };
 
 struct Energies {
-  double total = 0, e1 = 0, arap = 0, barrier = 0, complexity = 0, edges = 0;
+  double total = 0, e1 = 0, arap = 0, barrier = 0, complexity = 0, edges = 0, volume = 0;
 };
 
 Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, Eigen::VectorXd* g, HessianSink* H,
@@ -83,11 +85,18 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
     e.total = std::numeric_limits<double>::infinity();
     return e;
   }
+  if (p.opt.volume_barrier_weight > 0) {
+    e.volume = volume_barrier_energy(X, p.T, p.rest, p.opt.volume_barrier_weight, g, H);
+    if (!std::isfinite(e.volume)) {
+      e.total = std::numeric_limits<double>::infinity();
+      return e;
+    }
+  }
   e.e1 = l1_energy(X, p.B, eps, alpha / p.area0, g, H);
   e.arap = arap_energy(X, p.T, p.rest, 1.0, g, with_arap_hessian ? H : nullptr);
   if (p.opt.beta > 0) e.complexity = complexity_energy(X, p.B, p.pairs, p.opt.beta, g, H);
   if (!p.opt.edges.empty()) e.edges = edge_energy(X, p.B, p.pairs, p.opt.edges, 1.0, g, H);
-  e.total = e.e1 + e.arap + e.barrier + e.complexity + e.edges;
+  e.total = e.e1 + e.arap + e.barrier + e.complexity + e.edges + e.volume;
   return e;
 }
 
@@ -206,6 +215,12 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       Eigen::VectorXd gc = Eigen::VectorXd::Zero(X.size());
       const double C = area_constraint(X, B, p.area0, &gc);
       const std::vector<double> assembled = sys.values();
+      if (std::getenv("PCDBG")) {
+        int bad = 0;
+        for (double v : assembled) bad += !std::isfinite(v);
+        std::fprintf(stderr, "iter %d: e0 %g (e1 %g arap %g barrier %g) |g| %g nonfinite H %d C %g\n", total_iterations,
+                     e0.total, e0.e1, e0.arap, e0.barrier, g.norm(), bad, C);
+      }
       t_asm += sw_asm.seconds();
       Stopwatch sw_fac;
       // The Hessian changes slowly within a schedule step: reuse the last factorization as a
@@ -256,6 +271,14 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       }
       ++total_iterations;
       t_ls += sw_ls.seconds();
+      if (std::getenv("PCDBG") && accepted == 0) {
+        Xt = X + 1e-6 * D;
+        restore_area(Xt, B, p.area0);
+        Energies e1 = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
+        std::fprintf(stderr, "  line search failed: inverted %d, e(1e-6) - e0 = %g (e1 %g arap %g barrier %g), g.dx %g, lambda %g\n",
+                     (int)any_inverted(Xt, T), e1.total - e0.total, e1.e1 - e0.e1, e1.arap - e0.arap, e1.barrier - e0.barrier,
+                     g.dot(dx), lambda);
+      }
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.
         mu *= 10;

@@ -23,6 +23,9 @@ struct DeformOptions {
   double eps_min = 0.01;        ///< ...but never below this
   double beta = 0.0;            ///< weight of the complexity penalty E_eta (Eq. 10); larger = fewer corners
   double barrier_weight = 0.01; ///< weight of the anti-foldover log barrier (Eq. 11), per edge / #edges
+  /// Weight of a log barrier on tet volumes (not in the paper): keeps tets from flattening, which
+  /// would otherwise block the line search. 0 disables it.
+  double volume_barrier_weight = 1e-3;
   int max_alpha_steps = 20;     ///< schedule steps (alpha doublings) at most
   int max_inner_iterations = 100;  ///< SQP iterations per schedule step at most
   double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this

@@ -94,6 +94,7 @@ bool SparseSystem::factorize() {
   if (!analyzed_) {
     llt_ = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>>();
     llt_->setMode(Eigen::CholmodAuto);
+    llt_->cholmod().print = 0;  // the library never prints
     if (const char* o = std::getenv("PC_ORDER")) {
       auto& c = llt_->cholmod();
       c.nmethods = 1;

@@ -251,6 +251,18 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj["surface_vertices"] = stats.surface_vertices;
         tj["gmsh_runs"] = stats.attempts;
       }
+      // Tets with four boundary vertices would have to flatten on polycube faces: split them.
+      const int split = split_boundary_tets(tm);
+      if (split > 0) {
+        check_tet_mesh(tm, nullptr, "split tet mesh");
+        const TetQuality sq = measure_tets(tm.V, tm.T);
+        tj["vertices"] = tm.V.rows();
+        tj["tets"] = tm.T.rows();
+        tj["min_dihedral_deg"] = sq.min_dihedral_deg;
+        tj["max_dihedral_deg"] = sq.max_dihedral_deg;
+        hooks.debug("split " + std::to_string(split) + " tets with four boundary vertices");
+      }
+      tj["boundary_tets_split"] = split;
       report["tetmesh"] = tj;
       MeshData out_m;
       out_m.V = tm.V;

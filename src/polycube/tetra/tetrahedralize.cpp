@@ -110,6 +110,32 @@ void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::st
   }
 }
 
+int split_boundary_tets(TetMesh& tm) {
+  std::vector<char> on_boundary(tm.V.rows(), 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary[tm.boundary(f, k)] = 1;
+  std::vector<int> split;
+  for (int t = 0; t < tm.T.rows(); ++t)
+    if (on_boundary[tm.T(t, 0)] && on_boundary[tm.T(t, 1)] && on_boundary[tm.T(t, 2)] && on_boundary[tm.T(t, 3)])
+      split.push_back(t);
+  if (split.empty()) return 0;
+  const Eigen::Index nv = tm.V.rows(), nt = tm.T.rows();
+  tm.V.conservativeResize(nv + static_cast<Eigen::Index>(split.size()), 3);
+  tm.T.conservativeResize(nt + 3 * static_cast<Eigen::Index>(split.size()), 4);
+  for (size_t i = 0; i < split.size(); ++i) {
+    const int t = split[i];
+    const int c = static_cast<int>(nv + static_cast<Eigen::Index>(i));
+    const std::array<int, 4> v{tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)};
+    tm.V.row(c) = 0.25 * (tm.V.row(v[0]) + tm.V.row(v[1]) + tm.V.row(v[2]) + tm.V.row(v[3]));
+    // Tet i of the split replaces vertex i by the centroid: same orientation as the original.
+    for (int k = 0; k < 4; ++k) {
+      const Eigen::Index row = k == 0 ? t : nt + 3 * static_cast<Eigen::Index>(i) + (k - 1);
+      for (int j = 0; j < 4; ++j) tm.T(row, j) = j == k ? c : v[j];
+    }
+  }
+  return static_cast<int>(split.size());
+}
+
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {
   const auto cf = faces_by_component(layout);
   std::vector<double> V;

@@ -51,6 +51,12 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
 /// 2D meshing at `edge_length_abs`). The result still needs validate_surface.
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double edge_length_abs);
 
+/// Splits every tet whose four vertices all lie on the boundary by inserting its centroid (four
+/// new tets). Such tets must flatten wherever the boundary around them becomes planar, which would
+/// block the polycube deformation. The boundary is unchanged; new vertices are appended.
+/// Returns the number of tets split.
+int split_boundary_tets(TetMesh& tm);
+
 /// Checks a tet mesh against the surface it was built from: no inverted or zero-volume tet,
 /// and when `surface` is given, a boundary equal to it (same oriented triangles on the first
 /// surface.V.rows() vertices). Throws Error(Tetrahedralization) naming the problem.
