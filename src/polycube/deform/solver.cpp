@@ -261,9 +261,15 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       for (int ls = 0; ls < 40; ++ls, t *= 0.5) {
         Xt = X + t * D;
         restore_area(Xt, B, p.area0);
-        if (any_inverted(Xt, T)) continue;
+        if (any_inverted(Xt, T)) {
+          if (std::getenv("PCDBG2")) std::fprintf(stderr, "    t %g: inverted\n", t);
+          continue;
+        }
         et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
         ++n_ls;
+        if (std::getenv("PCDBG2") && ls < 12)
+          std::fprintf(stderr, "    t %g: d total %g e1 %g arap %g barrier %g volume %g\n", t, et.total - e0.total,
+                       et.e1 - e0.e1, et.arap - e0.arap, et.barrier - e0.barrier, et.volume - e0.volume);
         if (et.total < e0.total) {
           accepted = t;
           break;
