@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
                  "Surface edge length of the built-in examples, fraction of the bbox diagonal")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 0.5));
-  app.add_option("--until", until, "Stop after this stage: load, tet (later: deform, polycube, hex, quad)")
+  app.add_option("--until", until, "Stop after this stage: load, tet, deform (later: polycube, hex, quad)")
       ->capture_default_str();
   app.add_option("--edge-length", opt.tet.edge_length,
                  "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
@@ -75,6 +75,28 @@ int main(int argc, char** argv) {
                  "Surface edge length for CAD input (STEP/IGES/BREP), fraction of the bbox diagonal")
       ->capture_default_str()
       ->check(CLI::Range(1e-4, 0.5));
+  auto& d = opt.deform;
+  app.add_option("--alpha0", d.alpha0, "Polycube deformation: initial weight of the l1 energy (doubled at each schedule step)")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--eps0", d.eps0, "Polycube deformation: initial smoothing eps of |c| ~ sqrt(c^2+eps) (divided by sqrt 2 per step)")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--eps-min", d.eps_min, "Polycube deformation: smallest eps")->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--beta", d.beta, "Polycube deformation: complexity penalty weight (larger = fewer polycube corners)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--barrier-weight", d.barrier_weight, "Polycube deformation: anti-foldover barrier weight (Eq. 11)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--volume-barrier", d.volume_barrier_weight,
+                 "Polycube deformation: weight of the log barrier on tet volumes (0 = off, as in the paper)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
+      ->capture_default_str()->check(CLI::Range(1, 100));
+  app.add_option("--max-iterations", d.max_inner_iterations, "Polycube deformation: SQP iterations per schedule step at most")
+      ->capture_default_str()->check(CLI::Range(1, 10000));
+  app.add_option("--target-quality", d.target_quality,
+                 "Polycube deformation: stop when l1_quality = sum|N|_1/sum|N|_2 - 1 is below this")
+      ->capture_default_str()->check(CLI::PositiveNumber);
+  bool no_rotation = false;
+  app.add_flag("--no-rotation", no_rotation, "Polycube deformation: keep the input orientation (no global rotation, Eq. 3)");
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");
@@ -85,6 +107,7 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
+  if (no_rotation) opt.deform.global_rotation = false;
   auto logger = spdlog::stderr_color_mt("polycube");
   logger->set_pattern("%^[%l]%$ %v");
   logger->set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);

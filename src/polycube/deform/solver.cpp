@@ -71,6 +71,7 @@ struct Problem {
   ArapRest rest;
   double area0 = 1;
   const DeformOptions& opt;
+  double volume_weight = 0;  // current volume-barrier weight (raised when tets block the line search)
 };
 
 struct Energies {
@@ -85,8 +86,8 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
     e.total = std::numeric_limits<double>::infinity();
     return e;
   }
-  if (p.opt.volume_barrier_weight > 0) {
-    e.volume = volume_barrier_energy(X, p.T, p.rest, p.opt.volume_barrier_weight, g, H);
+  if (p.volume_weight > 0) {
+    e.volume = volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;
@@ -160,7 +161,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX3d X = (V.rowwise() - centre) / scale;
   POLYCUBE_ASSERT(!any_inverted(X, T), "the tet mesh given to the deformation has inverted tets");
 
-  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt};
+  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight};
   double l1 = 0;
   l1_measure(X, B, l1, p.area0);
   for (const EdgeConstraint& e : opt.edges)
@@ -186,12 +187,12 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0;
-  bool factor_valid = false;
+  bool factor_valid = false, stalled = false;
   double alpha = opt.alpha0, eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
   double q = quality(X);
-  for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality; ++step) {
+  for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
     const double d0 = q;
     std::vector<double> changes;
@@ -243,7 +244,13 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
           ok = sys.factorize();
           if (!ok) mu *= 100;
         }
-        if (!ok) throw Error(ErrorKind::Internal, "SQP system could not be factorized");
+        if (!ok) {
+          // Numerically singular (typically slim boundary triangles at a huge alpha): keep the
+          // current state, which is valid, and stop.
+          hooks.warn("the SQP system became numerically singular; stopping the deformation early");
+          stalled = true;
+          break;
+        }
         ++factorizations;
         factor_valid = true;
         Hg = sys.solve(g);
@@ -256,12 +263,14 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       Stopwatch sw_ls;
       // Backtracking: no inverted tet, finite barrier, decrease of the energy on the constraint.
       double t = 1.0, accepted = 0;
+      int inverted_trials = 0;
       MatX3d Xt;
       Energies et;
       for (int ls = 0; ls < 40; ++ls, t *= 0.5) {
         Xt = X + t * D;
         restore_area(Xt, B, p.area0);
         if (any_inverted(Xt, T)) {
+          ++inverted_trials;
           if (std::getenv("PCDBG2")) std::fprintf(stderr, "    t %g: inverted\n", t);
           continue;
         }
@@ -277,6 +286,11 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       }
       ++total_iterations;
       t_ls += sw_ls.seconds();
+      // Steps cut short by tets about to invert: the volume barrier is too weak for this shape.
+      if (inverted_trials >= 3 && p.volume_weight > 0 && p.volume_weight < opt.volume_barrier_max) {
+        p.volume_weight = std::min(opt.volume_barrier_max, 4 * p.volume_weight);
+        factor_valid = false;
+      }
       if (std::getenv("PCDBG") && accepted == 0) {
         Xt = X + 1e-6 * D;
         restore_area(Xt, B, p.area0);
@@ -353,6 +367,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   res.converged = res.l1_quality < opt.target_quality;
   res.seconds = clock.seconds();
   res.factorizations = factorizations;
+  res.volume_barrier_weight = p.volume_weight;
   return res;
 }
 

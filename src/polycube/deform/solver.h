@@ -25,7 +25,10 @@ struct DeformOptions {
   double barrier_weight = 0.01; ///< weight of the anti-foldover log barrier (Eq. 11), per edge / #edges
   /// Weight of a log barrier on tet volumes (not in the paper): keeps tets from flattening, which
   /// would otherwise block the line search. 0 disables it.
-  double volume_barrier_weight = 1e-3;
+  double volume_barrier_weight = 0.1;
+  /// The volume-barrier weight is multiplied by 4 whenever tets about to invert cut a line search
+  /// short, up to this value.
+  double volume_barrier_max = 1.0;
   int max_alpha_steps = 20;     ///< schedule steps (alpha doublings) at most
   int max_inner_iterations = 100;  ///< SQP iterations per schedule step at most
   double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this
@@ -58,6 +61,7 @@ struct DeformResult {
   double arap = 0;           ///< E_delta at the end
   int iterations = 0, alpha_steps = 0, inverted = 0;
   int factorizations = 0;    ///< sparse Cholesky factorizations made
+  double volume_barrier_weight = 0;  ///< final (possibly raised) volume-barrier weight
   bool converged = false;    ///< l1_quality reached target_quality
   double seconds = 0;
   std::vector<IterationRecord> history;

@@ -288,7 +288,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"alpha_steps", dr.alpha_steps},
                  {"inverted_tets", dr.inverted},
                  {"converged", dr.converged},
-                 {"seconds", dr.seconds}};
+                 {"seconds", dr.seconds},
+                 {"factorizations", dr.factorizations},
+                 {"volume_barrier_weight", dr.volume_barrier_weight}};
       pj["rotation"] = json::array();
       for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
       json hist = json::array();
