@@ -147,3 +147,26 @@ TEST(Cli, RemeshedSurfaceBeforeTetrahedralization) {
   EXPECT_EQ(j["tetmesh"]["inverted"], 0);
   EXPECT_NE(j["tetmesh"]["boundary_triangles"], j["input"]["triangles"]);
 }
+
+TEST(Cli, UntilDeformWritesDeformedMeshAndConvergenceRecord) {
+  std::string out = temp_dir("deform");
+  RunResult r = run_cli("--example rocker --example-size 0.06 --until deform -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  ASSERT_TRUE(j.contains("polycube"));
+  const json& p = j["polycube"];
+  EXPECT_LT(p["l1_quality"].get<double>(), 1e-3);
+  EXPECT_EQ(p["inverted_tets"], 0);
+  EXPECT_GT(p["iterations"].get<int>(), 0);
+  EXPECT_EQ(p["history"].size(), p["iterations"].get<size_t>());
+  for (const char* k : {"e1", "e_arap", "error_d", "alpha", "eps", "step", "seconds"})
+    EXPECT_TRUE(p["history"][0].contains(k)) << k;
+  EXPECT_GE(j["timings"]["deform"].get<double>(), 0.0);
+  MeshData m = io::read_mesh(out + "/deformed.vtk");
+  EXPECT_EQ(m.T.rows(), j["tetmesh"]["tets"].get<int>());
+  EXPECT_EQ(measure_tets(m.V, m.T).inverted, 0);
+  EXPECT_NE(read_text(out + "/deformed.vtk").find("COLOR_SCALARS normal_rgb 3"), std::string::npos);
+  MeshData t = io::read_mesh(out + "/tetmesh.mesh");
+  // Same connectivity as the tet mesh: the pair is the volumetric map.
+  EXPECT_EQ(m.T, t.T);
+}

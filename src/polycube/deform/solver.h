@@ -28,7 +28,7 @@ struct DeformOptions {
   double volume_barrier_weight = 0.1;
   /// The volume-barrier weight is multiplied by 4 whenever tets about to invert cut a line search
   /// short, up to this value.
-  double volume_barrier_max = 1.0;
+  double volume_barrier_max = 0.1;
   int max_alpha_steps = 20;     ///< schedule steps (alpha doublings) at most
   int max_inner_iterations = 100;  ///< SQP iterations per schedule step at most
   double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this
