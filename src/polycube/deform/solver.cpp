@@ -173,6 +173,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   for (int t = 0; t < T.rows(); ++t) elements.push_back({T(t, 0), T(t, 1), T(t, 2), T(t, 3)});
   for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
   SparseSystem sys(static_cast<int>(X.rows()), elements);
+  sys.cache_elements(elements);
   // The ARAP Hessian G^T G is constant: assemble it once.
   sys.set_zero();
   arap_energy(X, T, p.rest, 1.0, nullptr, &sys);

@@ -37,7 +37,7 @@ struct DeformOptions {
   /// The SQP systems are solved by conjugate gradients preconditioned with the last Cholesky
   /// factorization, to this relative residual; a new factorization is made at each schedule step
   /// and whenever CG needs more than cg_max_iterations.
-  double cg_tolerance = 1e-3;
+  double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
 };
 

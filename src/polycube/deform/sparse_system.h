@@ -5,6 +5,7 @@
 #pragma once
 #include <Eigen/CholmodSupport>
 #include <Eigen/Sparse>
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -21,6 +22,9 @@ class SparseSystem : public HessianSink {
   /// Current values (upper triangle, CSC order); copy/restore for a constant part.
   std::vector<double>& values() { return values_; }
   void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override;
+  /// Precomputes the value positions of the 4-vertex elements given to the constructor (tets
+  /// first), so that add() of those elements skips the index search.
+  void cache_elements(const std::vector<std::vector<int>>& elements);
   /// Adds mu to every diagonal entry.
   void add_diagonal(double mu);
   double mean_diagonal() const;
@@ -43,6 +47,9 @@ class SparseSystem : public HessianSink {
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
   std::vector<double> values_;
   std::vector<int> diag_;
+  // Cache: for a sorted 4-vertex key, offset into cache_pos_ of its 4x4x3 column-start positions.
+  std::vector<std::pair<std::array<int, 4>, int>> cache_keys_;
+  std::vector<int> cache_pos_;
   std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>> llt_;
   bool analyzed_ = false;
 };

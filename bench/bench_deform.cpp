@@ -1,0 +1,107 @@
+// Benchmark of the l1 polycube deformation on the shared meshes, beside the paper's Table II.
+// Not a test: run it by hand (build/polycube_bench --help). Quotes the median of --runs runs.
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include "polycube/core/error.h"
+#include "polycube/deform/solver.h"
+#include "polycube/io/readers.h"
+#include "polycube/tetra/tetrahedralize.h"
+#include "polycube/validate/surface.h"
+#include "polycube/validate/tetmesh.h"
+
+using namespace polycube;
+namespace fs = std::filesystem;
+
+struct Model {
+  std::string file;       // under meshes/
+  std::string paper_row;  // model name in table2, "" if the paper has none
+  int tets;               // target tet count (the paper's when it has the model)
+};
+
+int main(int argc, char** argv) {
+  CLI::App app{"Benchmark of the polycube deformation against the paper's Table II"};
+  std::string shared = POLYCUBE_SHARED_DIR;
+  int runs = 1;
+  double tet_scale = 1.0;
+  std::vector<std::string> only;
+  app.add_option("--shared", shared, "Folder holding meshes/ and paper/")->capture_default_str();
+  app.add_option("--runs", runs, "Runs per model (the median is reported)")->capture_default_str();
+  app.add_option("--tet-scale", tet_scale, "Multiply every target tet count by this")->capture_default_str();
+  app.add_option("--only", only, "Run only these models (file names)");
+  CLI11_PARSE(app, argc, argv);
+
+  const std::vector<Model> models = {
+      {"basic/sphere_coarse.obj", "", 5000},  {"basic/torus.obj", "", 5000},
+      {"tet/mambo_B0.mesh", "", 0},            {"basic/eight.off", "", 5000},
+      {"organic/spot.obj", "", 20000},         {"cad/fandisk.obj", "", 35000},
+      {"cad/rod.stl", "rod", 79936},           {"organic/bumpytorus.stl", "bumpy torus", 110942},
+      {"cad/rocker.stl", "rockerArm-1", 127746},
+  };
+  // Paper's Table II rows.
+  std::map<std::string, std::vector<std::string>> paper;
+  {
+    std::ifstream in(shared + "/paper/table2_quality_performance.tsv");
+    std::string line;
+    while (std::getline(in, line)) {
+      std::vector<std::string> c;
+      std::stringstream ss(line);
+      std::string x;
+      while (std::getline(ss, x, '\t')) c.push_back(x);
+      if (!c.empty() && !paper.count(c[0])) paper[c[0]] = c;
+    }
+  }
+  if (!fs::exists(shared + "/meshes")) {
+    std::printf("no meshes under %s/meshes: nothing to benchmark\n", shared.c_str());
+    return 0;
+  }
+  std::printf("| model | tets | iterations | alpha steps | factorizations | seconds (median of %d) | l1_quality | ARAP | inverted | paper: tets | iterations | minutes | ARAP |\n",
+              runs);
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const Model& m : models) {
+    if (!only.empty() && std::find(only.begin(), only.end(), fs::path(m.file).filename().string()) == only.end()) continue;
+    try {
+      MeshData in = io::read_mesh(shared + "/meshes/" + m.file);
+      TetMesh tm;
+      if (in.T.rows() > 0) {
+        TetInputReport tr;
+        tm = prepare_tet_input(in, tr);
+      } else {
+        SurfaceLayout l;
+        validate_surface(in, l);
+        SurfaceMesh s{in.V, in.F};
+        TetOptions o;
+        o.target_tets = static_cast<int>(m.tets * tet_scale);
+        tm = tetrahedralize(s, l, o, {});
+      }
+      split_boundary_tets(tm);
+      std::vector<double> secs;
+      deform::DeformResult r;
+      for (int k = 0; k < runs; ++k) {
+        r = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+        secs.push_back(r.seconds);
+      }
+      std::sort(secs.begin(), secs.end());
+      std::string p1 = "-", p2 = "-", p3 = "-", p4 = "-";
+      if (!m.paper_row.empty() && paper.count(m.paper_row)) {
+        auto& c = paper[m.paper_row];
+        p1 = c[1];
+        p2 = c[4];
+        p3 = c[5];
+        p4 = c[6];
+      }
+      std::printf("| %s | %ld | %d | %d | %d | %.2f | %.2e | %.4f | %d | %s | %s | %s | %s |\n", m.file.c_str(),
+                  (long)tm.T.rows(), r.iterations, r.alpha_steps, r.factorizations, secs[secs.size() / 2], r.l1_quality,
+                  r.arap, r.inverted, p1.c_str(), p2.c_str(), p3.c_str(), p4.c_str());
+      std::fflush(stdout);
+    } catch (const Error& e) {
+      std::printf("| %s | error: %s |\n", m.file.c_str(), e.what());
+    }
+  }
+  return 0;
+}
