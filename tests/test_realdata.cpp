@@ -90,3 +90,22 @@ TEST_P(RealData, LoadsAndTetrahedralizes) {
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealData, ::testing::ValuesIn(shared_meshes()), test_name);
+
+// The polycube deformation on small shared meshes: l1_quality below 1e-3, no inverted tet.
+class RealDeform : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(RealDeform, ReachesAPolycube) {
+  const std::string path = shared_dir() + "/meshes/" + GetParam();
+  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir("real_deform");
+  opt.until = Stage::Deform;
+  nlohmann::json j = run_pipeline(opt);
+  EXPECT_LT(j["polycube"]["l1_quality"].get<double>(), 1e-3);
+  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_LT(j["polycube"]["arap_distortion"].get<double>(), 0.15);
+}
+
+INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealDeform,
+                         ::testing::Values("tet/mambo_B0.mesh", "basic/eight.off", "basic/torus.obj"), test_name);
