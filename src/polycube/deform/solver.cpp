@@ -1,9 +1,8 @@
 #include "polycube/deform/solver.h"
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <sstream>
 
@@ -189,6 +188,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0;
   bool factor_valid = false, stalled = false;
+  double t_last_factor = 0, t_cg_iteration = 1;
   double alpha = opt.alpha0, eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
@@ -217,12 +217,6 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       Eigen::VectorXd gc = Eigen::VectorXd::Zero(X.size());
       const double C = area_constraint(X, B, p.area0, &gc);
       const std::vector<double> assembled = sys.values();
-      if (std::getenv("PCDBG")) {
-        int bad = 0;
-        for (double v : assembled) bad += !std::isfinite(v);
-        std::fprintf(stderr, "iter %d: e0 %g (e1 %g arap %g barrier %g) |g| %g nonfinite H %d C %g\n", total_iterations,
-                     e0.total, e0.e1, e0.arap, e0.barrier, g.norm(), bad, C);
-      }
       t_asm += sw_asm.seconds();
       Stopwatch sw_fac;
       // The Hessian changes slowly within a schedule step: reuse the last factorization as a
@@ -232,17 +226,27 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       if (factor_valid) {
         sys.values() = assembled;
         sys.add_diagonal(mu);
-        const int i1 = sys.solve_pcg(g, Hg, opt.cg_tolerance, opt.cg_max_iterations);
-        const int i2 = i1 > 0 ? sys.solve_pcg(gc, Hc, opt.cg_tolerance, opt.cg_max_iterations) : -1;
+        // On large meshes a factorization costs many CG iterations (O(n^2) against O(n^4/3) in
+        // 3D): allow CG up to a quarter of a factorization's time per solve, at least cg_max_iterations.
+        const int limit = std::clamp(static_cast<int>(0.25 * t_last_factor / std::max(1e-9, t_cg_iteration)),
+                                     opt.cg_max_iterations, 100);
+        Stopwatch sw_cg;
+        const int i1 = sys.solve_pcg(g, Hg, opt.cg_tolerance, limit);
+        const int i2 = i1 > 0 ? sys.solve_pcg(gc, Hc, opt.cg_tolerance, limit) : -1;
         solved = i1 > 0 && i2 > 0;
-        if (solved) cg_iterations += i1 + i2;
+        if (solved) {
+          cg_iterations += i1 + i2;
+          t_cg_iteration = sw_cg.seconds() / (i1 + i2);
+        }
       }
       if (!solved) {
         bool ok = false;
         for (int tries = 0; tries < 8 && !ok; ++tries) {
           sys.values() = assembled;
           sys.add_diagonal(mu);
+          Stopwatch sw_f;
           ok = sys.factorize();
+          t_last_factor = sw_f.seconds();
           if (!ok) mu *= 100;
         }
         if (!ok) {
@@ -272,14 +276,10 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
         restore_area(Xt, B, p.area0);
         if (any_inverted(Xt, T)) {
           ++inverted_trials;
-          if (std::getenv("PCDBG2")) std::fprintf(stderr, "    t %g: inverted\n", t);
           continue;
         }
         et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
         ++n_ls;
-        if (std::getenv("PCDBG2") && ls < 12)
-          std::fprintf(stderr, "    t %g: d total %g e1 %g arap %g barrier %g volume %g\n", t, et.total - e0.total,
-                       et.e1 - e0.e1, et.arap - e0.arap, et.barrier - e0.barrier, et.volume - e0.volume);
         if (et.total < e0.total) {
           accepted = t;
           break;
@@ -291,14 +291,6 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       if (inverted_trials >= 3 && p.volume_weight > 0 && p.volume_weight < opt.volume_barrier_max) {
         p.volume_weight = std::min(opt.volume_barrier_max, 4 * p.volume_weight);
         factor_valid = false;
-      }
-      if (std::getenv("PCDBG") && accepted == 0) {
-        Xt = X + 1e-6 * D;
-        restore_area(Xt, B, p.area0);
-        Energies e1 = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
-        std::fprintf(stderr, "  line search failed: inverted %d, e(1e-6) - e0 = %g (e1 %g arap %g barrier %g), g.dx %g, lambda %g\n",
-                     (int)any_inverted(Xt, T), e1.total - e0.total, e1.e1 - e0.e1, e1.arap - e0.arap, e1.barrier - e0.barrier,
-                     g.dot(dx), lambda);
       }
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.

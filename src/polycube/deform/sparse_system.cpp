@@ -4,9 +4,6 @@
 
 #include <algorithm>
 #include <thread>
-#include <cstdio>
-#include <cstdlib>
-#include "polycube/core/log.h"
 
 #include "polycube/core/error.h"
 
@@ -129,21 +126,10 @@ bool SparseSystem::factorize() {
     llt_ = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>>();
     llt_->setMode(Eigen::CholmodAuto);
     llt_->cholmod().print = 0;  // the library never prints
-    if (const char* o = std::getenv("PC_ORDER")) {
-      auto& c = llt_->cholmod();
-      c.nmethods = 1;
-      c.method[0].ordering = std::atoi(o);
-      c.postorder = 1;
-    }
     llt_->analyzePattern(A_);
     analyzed_ = true;
   }
-  Stopwatch sw;
   llt_->factorize(A_);
-  if (std::getenv("PCDBG")) {
-    auto& c = llt_->cholmod();
-    std::fprintf(stderr, "factorize %.4f s, nnz(A) %ld, lnz %.0f, flops %.3g, ordering %d\n", sw.seconds(), (long)A_.nonZeros(), c.lnz, c.fl, c.method[c.selected].ordering);
-  }
   return llt_->info() == Eigen::Success;
 }
 
