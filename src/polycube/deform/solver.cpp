@@ -202,7 +202,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
     factor_valid = false;  // alpha and eps changed: start the step with a fresh factorization
     for (int it = 0; it < opt.max_inner_iterations; ++it) {
       Stopwatch sw_rot;
-      if (opt.global_rotation) {
+      if (opt.global_rotation && (it == 0 || (opt.rotation_interval > 0 && it % opt.rotation_interval == 0))) {
         const Eigen::Matrix3d R = best_rotation(X, B, eps);
         const Eigen::RowVector3d c = X.colwise().mean();
         X = ((X.rowwise() - c) * R.transpose()).rowwise() + c;
