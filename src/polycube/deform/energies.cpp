@@ -57,13 +57,6 @@ inline Eigen::Matrix<double, 9, 9> normal_second(const Vec3& w) {
   return H;
 }
 
-template <int N>
-Eigen::Matrix<double, N, N> project_psd(const Eigen::Matrix<double, N, N>& H) {
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, N, N>> es(H);
-  Eigen::Matrix<double, N, 1> l = es.eigenvalues().cwiseMax(0.0);
-  return es.eigenvectors() * l.asDiagonal() * es.eigenvectors().transpose();
-}
-
 inline Vec3 row(const MatX3d& X, int i) { return X.row(i).transpose(); }
 
 // Rotation part of the polar decomposition of F (closest rotation, never a reflection). Closed-form
