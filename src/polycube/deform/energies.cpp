@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <thread>
 
 namespace polycube::deform {
 
@@ -203,35 +204,49 @@ ArapRest ArapRest::build(const MatX3d& X, const MatX4i& T) {
 
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
                    HessianSink* hess, std::vector<double>* per_tet) {
-  double E = 0;
   if (per_tet) per_tet->resize(T.rows());
-  for (int t = 0; t < T.rows(); ++t) {
-    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-    Eigen::Matrix3d Ds;
-    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-    const Eigen::Matrix3d Fm = Ds * Di;
-    const Eigen::Matrix3d R = closest_rotation(Fm);
-    const double delta = 0.5 * (Fm - R).squaredNorm();
-    if (per_tet) (*per_tet)[t] = delta;
-    E += rest.w[t] * delta;
-    // B: 4 x 3, row p = d F / d x_p (as a row vector multiplying x_p^T).
-    Eigen::Matrix<double, 4, 3> B;
-    B.bottomRows<3>() = Di;
-    B.row(0) = -Di.colwise().sum();
-    if (grad) {
-      const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
-      for (int p = 0; p < 4; ++p) grad->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
+  // Tets [begin, end): energy, gradient into g (if any), Hessian into hess (if any).
+  auto range = [&](int begin, int end, Eigen::VectorXd* g) {
+    double E = 0;
+    for (int t = begin; t < end; ++t) {
+      const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+      Eigen::Matrix3d Ds;
+      for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+      const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+      const Eigen::Matrix3d Fm = Ds * Di;
+      const Eigen::Matrix3d R = closest_rotation(Fm);
+      const double delta = 0.5 * (Fm - R).squaredNorm();
+      if (per_tet) (*per_tet)[t] = delta;
+      E += rest.w[t] * delta;
+      // B: 4 x 3, row p = d F / d x_p (as a row vector multiplying x_p^T).
+      Eigen::Matrix<double, 4, 3> B;
+      B.bottomRows<3>() = Di;
+      B.row(0) = -Di.colwise().sum();
+      if (g) {
+        const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
+        for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
+      }
+      if (hess) {
+        const Eigen::Matrix4d K = B * B.transpose();
+        Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
+        for (int p = 0; p < 4; ++p)
+          for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
+        hess->add(v, 4, weight * rest.w[t] * H);
+      }
     }
-    if (hess) {
-      const Eigen::Matrix4d K = B * B.transpose();
-      Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
-      for (int p = 0; p < 4; ++p)
-        for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
-      hess->add(v, 4, weight * rest.w[t] * H);
-    }
-  }
-  return weight * E;
+    return E;
+  };
+  const int n = static_cast<int>(T.rows());
+  if (hess || n < 4000) return weight * range(0, n, grad);
+  // Energy and gradient only (every SQP iteration and line-search trial): split over two threads.
+  Eigen::VectorXd g2;
+  if (grad) g2 = Eigen::VectorXd::Zero(grad->size());
+  double E2 = 0;
+  std::thread worker([&] { E2 = range(n / 2, n, grad ? &g2 : nullptr); });
+  const double E1 = range(0, n / 2, grad);
+  worker.join();
+  if (grad) *grad += g2;
+  return weight * (E1 + E2);
 }
 
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
