@@ -275,32 +275,6 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   return weight * E;
 }
 
-double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
-                      Eigen::VectorXd* grad, HessianSink* hess) {
-  double E = 0;
-  for (const FacePair& p : pairs) {
-    const int v[4] = {p.a, p.b, p.c, p.d};
-    const UnitNormal nf = unit_normal(X, F(p.f, 0), F(p.f, 1), F(p.f, 2));
-    const UnitNormal ng = unit_normal(X, p.b, p.a, p.d);
-    (void)F;
-    const double D = 1.0 + nf.n.dot(ng.n);
-    if (!(D > 0)) return std::numeric_limits<double>::infinity();
-    E -= std::log(D);
-    if (!grad && !hess) continue;
-    // Face f may start at any corner: reorder its derivative to (a, b, c).
-    Eigen::Matrix<double, 3, 9> dnf;
-    for (int k = 0; k < 3; ++k) {
-      int id = F(p.f, k);
-      int slot = id == p.a ? 0 : id == p.b ? 1 : 2;
-      dnf.block<3, 3>(0, 3 * slot) = nf.dn.block<3, 3>(0, 3 * k);
-    }
-    const Eigen::Matrix<double, 1, 12> dD = ng.n.transpose() * pair_jac_f(dnf) + nf.n.transpose() * pair_jac_g(ng.dn);
-    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight / D * dD.transpose()));
-    if (hess) hess->add(v, 4, weight / (D * D) * dD.transpose() * dD);
-  }
-  return weight * E;
-}
-
 namespace {
 // Per pair: the derivative of n_f and n_g over (a, b, c, d).
 struct PairNormals {
@@ -327,6 +301,24 @@ PairNormals pair_normals(const MatX3d& X, const MatX3i& F, const FacePair& p) {
   return r;
 }
 }  // namespace
+
+double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
+                      Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (const FacePair& p : pairs) {
+    const int v[4] = {p.a, p.b, p.c, p.d};
+    const PairNormals pn = pair_normals(X, F, p);
+    const double D = 1.0 + pn.nf.dot(pn.ng);
+    if (!(D > 0)) return std::numeric_limits<double>::infinity();
+    E -= std::log(D);
+    if (!grad && !hess) continue;
+    const Eigen::Matrix<double, 1, 12> dD = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight / D * dD.transpose()));
+    if (hess) hess->add(v, 4, weight / (D * D) * dD.transpose() * dD);
+  }
+  return weight * E;
+}
+
 
 double complexity_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
                          Eigen::VectorXd* grad, HessianSink* hess) {
