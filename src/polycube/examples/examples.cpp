@@ -3,7 +3,6 @@
 #include <gmsh.h>
 
 #include <cmath>
-#include <unordered_map>
 
 #include "polycube/core/error.h"
 #include "polycube/io/builder.h"
@@ -72,26 +71,12 @@ MeshData make(const std::string& name, double mesh_size) {
   s.run(ErrorKind::Internal, "example " + name, [&] {
     gmsh::model::add(name);
     build(name);
-    double x0, y0, z0, x1, y1, z1;
-    gmsh::model::getBoundingBox(-1, -1, x0, y0, z0, x1, y1, z1);
-    const double diag = std::sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0) + (z1 - z0) * (z1 - z0));
+    const double diag = io::gmsh_model_diagonal();
     gmsh::option::setNumber("Mesh.MeshSizeMax", mesh_size * diag);
     gmsh::option::setNumber("Mesh.MeshSizeMin", 0.25 * mesh_size * diag);
     gmsh::option::setNumber("Mesh.MeshSizeFromCurvature", 16);
     gmsh::model::mesh::generate(2);
-    std::vector<std::size_t> tags;
-    std::vector<double> xyz, par;
-    gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
-    std::unordered_map<std::size_t, int> id;
-    for (size_t i = 0; i < tags.size(); ++i)
-      if (!id.count(tags[i])) {
-        id[tags[i]] = b.num_vertices();
-        b.add_vertex(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2], 0);
-      }
-    std::vector<std::size_t> et, en;
-    gmsh::model::mesh::getElementsByType(2, et, en, -1);
-    for (size_t i = 0; i < et.size(); ++i)
-      b.add_triangle(id.at(en[3 * i]), id.at(en[3 * i + 1]), id.at(en[3 * i + 2]), static_cast<int>(i), 0);
+    io::collect_gmsh_mesh(b, "example " + name, true);
   });
   MeshData m;
   m.format = "example:" + name;

@@ -42,4 +42,14 @@ class GmshSession {
   std::unique_lock<std::mutex> lock_;
 };
 
+struct Builder;
+
+/// Copies the mesh of the current Gmsh model (all entities) into `b`: triangles (and, with
+/// `surface_only`, quads split into triangles) or quads, tets, hexes; higher-order elements keep
+/// their corner nodes. Throws Error(Parse) naming `path` for other element types. Call inside run().
+void collect_gmsh_mesh(Builder& b, const std::string& path, bool surface_only);
+
+/// Bounding-box diagonal of the current Gmsh model. Call inside run().
+double gmsh_model_diagonal();
+
 }  // namespace polycube::io

@@ -1,6 +1,7 @@
 // Formats read through the Gmsh library: .msh and CAD (STEP, IGES, BREP via OpenCASCADE).
 #include <gmsh.h>
 
+#include <cmath>
 #include <filesystem>
 #include <unordered_map>
 
@@ -19,9 +20,11 @@ void require_file(const std::string& path) {
   if (std::filesystem::file_size(path, ec) == 0) throw Error(ErrorKind::Parse, path + ": file is empty");
 }
 
+}  // namespace
+
 // Copies the current Gmsh model's mesh (all entities) into a Builder. Element types: first-order
 // and higher-order variants of triangle, quad, tet, hex (only corner nodes are kept).
-void collect_mesh(Builder& b, const std::string& path, bool surface_only) {
+void collect_gmsh_mesh(Builder& b, const std::string& path, bool surface_only) {
   std::vector<std::size_t> tags;
   std::vector<double> coord, param;
   gmsh::model::mesh::getNodes(tags, coord, param, -1, -1, false, false);
@@ -68,7 +71,11 @@ void collect_mesh(Builder& b, const std::string& path, bool surface_only) {
     }
   }
 }
-}  // namespace
+double gmsh_model_diagonal() {
+  double x0, y0, z0, x1, y1, z1;
+  gmsh::model::getBoundingBox(-1, -1, x0, y0, z0, x1, y1, z1);
+  return std::sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0) + (z1 - z0) * (z1 - z0));
+}
 
 MeshData read_msh(const std::string& path) {
   require_file(path);
@@ -78,7 +85,7 @@ MeshData read_msh(const std::string& path) {
     gmsh::open(path);
     std::string err = s.last_error();
     if (!err.empty()) throw Error(ErrorKind::Parse, path + ": " + err);
-    collect_mesh(b, path, false);
+    collect_gmsh_mesh(b, path, false);
   });
   MeshData m;
   m.path = path;
@@ -96,16 +103,14 @@ MeshData read_cad(const std::string& path, const CadOptions& opt) {
     gmsh::model::occ::importShapes(path, out, true);
     gmsh::model::occ::synchronize();
     if (out.empty()) throw Error(ErrorKind::Parse, path + ": the CAD file contains no shape");
-    double x0, y0, z0, x1, y1, z1;
-    gmsh::model::getBoundingBox(-1, -1, x0, y0, z0, x1, y1, z1);
-    const double diag = std::sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0) + (z1 - z0) * (z1 - z0));
+    const double diag = gmsh_model_diagonal();
     gmsh::option::setNumber("Mesh.MeshSizeMax", opt.mesh_size * diag);
     gmsh::option::setNumber("Mesh.MeshSizeMin", 0.1 * opt.mesh_size * diag);
     gmsh::option::setNumber("Mesh.MeshSizeFromCurvature", 12);
   });
   s.run(ErrorKind::InvalidMesh, path + ": surface meshing of the CAD model failed", [&] {
     gmsh::model::mesh::generate(2);
-    collect_mesh(b, path, true);
+    collect_gmsh_mesh(b, path, true);
   });
   MeshData m;
   m.path = path;

@@ -10,6 +10,7 @@
 #include <unordered_map>
 
 #include "polycube/core/error.h"
+#include "polycube/io/builder.h"
 #include "polycube/io/gmsh_session.h"
 #include "polycube/validate/intersections.h"
 
@@ -177,22 +178,12 @@ SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, do
           gmsh::option::setNumber("Mesh.MeshSizeExtendFromBoundary", 0);
           gmsh::option::setNumber("Mesh.Algorithm", 6);
           gmsh::model::mesh::generate(2);
-          std::vector<std::size_t> tags;
-          std::vector<double> xyz, par;
-          gmsh::model::mesh::getNodes(tags, xyz, par, -1, -1, true, false);
-          std::unordered_map<std::size_t, int> id;
+          io::Builder b;
+          io::collect_gmsh_mesh(b, "remeshed surface", true);
+          if (b.f.empty()) throw Error(ErrorKind::Tetrahedralization, "no triangles generated");
           const int base = static_cast<int>(V.size() / 3);
-          std::vector<double> cv;
-          for (size_t i = 0; i < tags.size(); ++i)
-            if (!id.count(tags[i])) {
-              id[tags[i]] = base + static_cast<int>(id.size());
-              cv.insert(cv.end(), {xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]});
-            }
-          std::vector<std::size_t> et, en;
-          gmsh::model::mesh::getElementsByType(2, et, en, -1);
-          if (et.empty()) throw Error(ErrorKind::Tetrahedralization, "no triangles generated");
-          V.insert(V.end(), cv.begin(), cv.end());
-          for (std::size_t t : en) F.push_back(id.at(t));
+          V.insert(V.end(), b.v.begin(), b.v.end());
+          for (int v : b.f) F.push_back(base + v);
         });
         done = true;
         break;
