@@ -316,16 +316,6 @@ MeshData read_vtk(const std::string& path) {
   m.path = path;
   m.format = c.binary ? "vtk-binary" : "vtk-ascii";
   b.finish(m);
-  // Surface quads of a surface-only file are polygons of the surface: triangulate them.
-  if (!m.is_volume() && m.Q.rows() > 0) {
-    Builder b2;
-    b2.v = b.v;
-    b2.f = b.f; b2.fsrc = b.fsrc; b2.fline = b.fline;
-    for (int i = 0; i < m.Q.rows(); ++i) b2.add_polygon({m.Q(i, 0), m.Q(i, 1), m.Q(i, 2), m.Q(i, 3)}, nface++, 0);
-    b2.vline = b.vline;
-    b2.finish(m);
-    m.Q.resize(0, 4);
-  }
   return m;
 }
 
