@@ -303,14 +303,14 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       mu = std::max(1e-8 * arap_diag, mu * 0.3);
       const double move = (Xt - X).rowwise().norm().maxCoeff();
       X = Xt;
-      q = quality(X);
+      double s1, a1;
+      l1_measure(X, B, s1, a1);
+      q = s1 / a1 - 1.0;
       IterationRecord r;
       r.alpha_step = step;
       r.iteration = total_iterations;
       r.alpha = alpha;
       r.eps = eps;
-      double s1, a1;
-      l1_measure(X, B, s1, a1);
       r.e1 = s1 / p.area0;
       r.e_arap = et.arap;
       r.error_d = (s1 - p.area0) * scale * scale;
@@ -350,9 +350,9 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   const Eigen::RowVector3d c = X.colwise().mean();
   res.X = ((X.rowwise() - c) * scale).rowwise() + centre;
   res.rotation = R_total;
-  res.l1_quality = quality(X);
   double s1, a1;
   l1_measure(X, B, s1, a1);
+  res.l1_quality = s1 / a1 - 1.0;
   res.error_d = (s1 - p.area0) * scale * scale;
   res.arap = arap_energy(X, T, p.rest, 1.0, nullptr, nullptr);
   res.iterations = total_iterations;
