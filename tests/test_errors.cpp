@@ -36,6 +36,16 @@ const char* kCubeVertices = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv 0 0 1\nv 1 0 
 const char* kCubeFaces =
     "f 1 3 2\nf 2 3 4\nf 5 6 7\nf 6 8 7\nf 1 2 5\nf 2 6 5\nf 3 7 4\nf 4 7 8\nf 1 5 3\nf 3 5 7\nf 2 4 6\nf 4 8 6\n";
 
+// OBJ face lines of the unit cube whose 8 vertices start at 1-based index `first`.
+std::string cube_faces(int first) {
+  const int tri[12][3] = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
+                          {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  std::string s;
+  for (auto& t : tri)
+    s += "f " + std::to_string(first + t[0]) + " " + std::to_string(first + t[1]) + " " + std::to_string(first + t[2]) + "\n";
+  return s;
+}
+
 }  // namespace
 
 TEST(Errors, MissingFile) { expect_refused("/nonexistent/x.obj", 3, {"no such file"}); }
@@ -114,11 +124,7 @@ TEST(Errors, NonManifoldVertex) {
   // Two cubes touching at one corner.
   std::string obj = std::string(kCubeVertices) + kCubeFaces;
   obj += "v 2 1 1\nv 1 2 1\nv 2 2 1\nv 1 1 2\nv 2 1 2\nv 1 2 2\nv 2 2 2\n";
-  // Second cube: corners 8 (shared, 1-based) and 9..15.
-  int c[8] = {8, 9, 10, 11, 12, 13, 14, 15};
-  const int tri[12][3] = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                          {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  for (auto& t : tri) obj += "f " + std::to_string(c[t[0]]) + " " + std::to_string(c[t[1]]) + " " + std::to_string(c[t[2]]) + "\n";
+  obj += cube_faces(8);  // second cube: corner 8 (1-based) shared, then 9..15
   expect_refused(file("pinch.obj", obj), 4, {"non-manifold vertices", "vertex 7 (line 8)"});
 }
 
@@ -134,9 +140,7 @@ TEST(Errors, SelfIntersection) {
   std::string obj = kCubeVertices;
   obj += "v 0.5 0.5 0.5\nv 1.5 0.5 0.5\nv 0.5 1.5 0.5\nv 1.5 1.5 0.5\nv 0.5 0.5 1.5\nv 1.5 0.5 1.5\nv 0.5 1.5 1.5\nv 1.5 1.5 1.5\n";
   obj += kCubeFaces;
-  const int tri[12][3] = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                          {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  for (auto& t : tri) obj += "f " + std::to_string(9 + t[0]) + " " + std::to_string(9 + t[1]) + " " + std::to_string(9 + t[2]) + "\n";
+  obj += cube_faces(9);
   expect_refused(file("cross.obj", obj), 4, {"intersects itself", "faces "});
 }
 

@@ -20,6 +20,22 @@ void expect_same(const MatX3d& V1, const MatX3i& F1, const MeshData& m, double t
   EXPECT_EQ(m.F, F1);
 }
 
+// One mesh with every element kind, on vertices with non-representable coordinates.
+SurfaceMesh odd_sphere();
+MeshData all_elements() {
+  MeshData m;
+  m.V = odd_sphere().V.topRows(12);
+  m.F.resize(1, 3);
+  m.F << 0, 1, 2;
+  m.Q.resize(1, 4);
+  m.Q << 0, 1, 2, 3;
+  m.T.resize(2, 4);
+  m.T << 0, 1, 2, 3, 4, 5, 6, 7;
+  m.H.resize(1, 8);
+  m.H << 0, 1, 2, 3, 4, 5, 6, 7;
+  return m;
+}
+
 SurfaceMesh odd_sphere() {
   // Non-representable coordinates so that lossy writers would show.
   SurfaceMesh s = sphere(2, Vec3(0.1, -2.3, 1e3), 0.7);
@@ -138,16 +154,7 @@ TEST(IO, PlyWithExtraPropertiesAndFloat) {
 }
 
 TEST(IO, MeditRoundTripAllElements) {
-  MeshData m;
-  m.V = odd_sphere().V.topRows(12);
-  m.F.resize(1, 3);
-  m.F << 0, 1, 2;
-  m.Q.resize(1, 4);
-  m.Q << 0, 1, 2, 3;
-  m.T.resize(2, 4);
-  m.T << 0, 1, 2, 3, 4, 5, 6, 7;
-  m.H.resize(1, 8);
-  m.H << 0, 1, 2, 3, 4, 5, 6, 7;
+  MeshData m = all_elements();
   auto p = temp_dir("io") + "/a.mesh";
   io::write_medit(p, m);
   auto r = io::read_mesh(p);
@@ -170,14 +177,8 @@ TEST(IO, MeditSkipsKnownSections) {
 }
 
 TEST(IO, VtkAsciiAndBinaryRoundTrip) {
-  MeshData m;
-  m.V = odd_sphere().V.topRows(12);
-  m.F.resize(1, 3);
-  m.F << 0, 1, 2;
-  m.T.resize(2, 4);
-  m.T << 0, 1, 2, 3, 4, 5, 6, 7;
-  m.H.resize(1, 8);
-  m.H << 0, 1, 2, 3, 4, 5, 6, 7;
+  MeshData m = all_elements();
+  m.Q.resize(0, 4);  // quads of a volume file come back as quads; keep the cell count of the field
   for (bool binary : {false, true}) {
     auto p = temp_dir("io") + (binary ? "/b.vtk" : "/a.vtk");
     io::CellFields fields{{"label", {1, 2, 3, 4}}};
