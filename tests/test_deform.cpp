@@ -1,6 +1,7 @@
 // The l1 polycube deformation on shapes with known answers.
 #include <random>
 
+#include "polycube/chart/labeling.h"
 #include "polycube/deform/solver.h"
 #include "polycube/examples/examples.h"
 #include "polycube/tetra/tetrahedralize.h"
@@ -11,37 +12,8 @@ using namespace polycube::test;
 
 namespace {
 
-TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0) {
-  MeshData m = make_mesh_data(V, F);
-  SurfaceLayout l;
-  validate_surface(m, l);
-  SurfaceMesh s{m.V, m.F};
-  TetOptions o;
-  o.target_tets = target_tets;
-  TetMesh tm = tetrahedralize(s, l, o, {});
-  split_boundary_tets(tm);
-  return tm;
-}
-
 // Charts: connected sets of boundary triangles with the same dominant normal axis and sign.
-int count_charts(const MatX3d& X, const MatX3i& F) {
-  std::vector<int> label(F.rows());
-  for (int f = 0; f < F.rows(); ++f) {
-    Vec3 n = deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2));
-    int k;
-    n.cwiseAbs().maxCoeff(&k);
-    label[f] = 2 * k + (n[k] < 0);
-  }
-  auto pairs = deform::face_pairs(F);
-  std::vector<int> parent(F.rows());
-  for (int f = 0; f < F.rows(); ++f) parent[f] = f;
-  std::function<int(int)> find = [&](int x) { return parent[x] == x ? x : parent[x] = find(parent[x]); };
-  for (auto& p : pairs)
-    if (label[p.f] == label[p.g]) parent[find(p.f)] = find(p.g);
-  int n = 0;
-  for (int f = 0; f < F.rows(); ++f) n += find(f) == f;
-  return n;
-}
+int count_charts(const MatX3d& X, const MatX3i& F) { return chart::build_charts(X, F, chart::label_by_normal(X, F)).count(); }
 
 double boundary_area(const MatX3d& X, const MatX3i& F) {
   double l1, a;

@@ -14,6 +14,8 @@
 
 #include "polycube/core/types.h"
 #include "polycube/io/mesh_data.h"
+#include "polycube/tetra/tetrahedralize.h"
+#include "polycube/validate/surface.h"
 
 namespace polycube::test {
 
@@ -82,6 +84,64 @@ inline SurfaceMesh torus(double R = 1.0, double r = 0.4, int n = 24, int m = 12)
       s.F.row(k++) << a, c, d;
     }
   return s;
+}
+
+/// Box [lo, hi] with every face an n x n grid of quads split into triangles (welded, outward).
+inline SurfaceMesh grid_box(int n, Vec3 lo = Vec3(0, 0, 0), Vec3 hi = Vec3(1, 1, 1)) {
+  std::map<std::array<int, 3>, int> id;
+  std::vector<Vec3> V;
+  std::vector<std::array<int, 3>> F;
+  auto vertex = [&](std::array<int, 3> g) {
+    auto it = id.find(g);
+    if (it != id.end()) return it->second;
+    Vec3 p;
+    for (int k = 0; k < 3; ++k) p[k] = lo[k] + (hi[k] - lo[k]) * g[k] / n;
+    V.push_back(p);
+    return id[g] = static_cast<int>(V.size()) - 1;
+  };
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, w = (axis + 2) % 3;  // (u, w, axis) right-handed
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+          std::array<int, 3> g[4];
+          const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
+          for (int c = 0; c < 4; ++c) {
+            g[c][axis] = side * n;
+            g[c][u] = i + di[c];
+            g[c][w] = j + dj[c];
+          }
+          int q[4];
+          for (int c = 0; c < 4; ++c) q[c] = vertex(g[c]);
+          if (side == 1) {
+            F.push_back({q[0], q[1], q[2]});
+            F.push_back({q[0], q[2], q[3]});
+          } else {
+            F.push_back({q[0], q[2], q[1]});
+            F.push_back({q[0], q[3], q[2]});
+          }
+        }
+    }
+  SurfaceMesh s;
+  s.V.resize(V.size(), 3);
+  for (size_t i = 0; i < V.size(); ++i) s.V.row(i) = V[i];
+  s.F.resize(F.size(), 3);
+  for (size_t i = 0; i < F.size(); ++i) s.F.row(i) << F[i][0], F[i][1], F[i][2];
+  return s;
+}
+
+/// Tetrahedralizes a closed surface (target tet count, 0 = Gmsh's default sizing) and splits
+/// tets with four boundary vertices, as the pipeline does.
+inline TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0) {
+  MeshData m = make_mesh_data(V, F);
+  SurfaceLayout l;
+  validate_surface(m, l);
+  SurfaceMesh s{m.V, m.F};
+  TetOptions o;
+  o.target_tets = target_tets;
+  TetMesh tm = tetrahedralize(s, l, o, {});
+  split_boundary_tets(tm);
+  return tm;
 }
 
 /// Concatenates two surfaces.

@@ -1,0 +1,29 @@
+// The polycube stage as one call: label the deformed boundary, clean the labels up, check the
+// chart graph, realize the exact polycube (labeling.h, realize.h).
+#pragma once
+#include <vector>
+
+#include "polycube/chart/labeling.h"
+#include "polycube/chart/realize.h"
+#include "polycube/core/log.h"
+
+namespace polycube::chart {
+
+struct ExtractOptions {
+  CleanupOptions cleanup;
+  RealizeOptions realize;
+};
+
+struct PolycubeExtraction {
+  std::vector<int> labels;   ///< per boundary triangle (row of B), after cleanup
+  int initial_charts = 0;    ///< charts of the raw labelling
+  CleanupStats cleanup;
+  ChartReport charts;        ///< the cleaned chart graph
+  RealizeResult realized;    ///< realized.success tells whether an exact polycube was built
+};
+
+/// rest/T/B: tet mesh and outward boundary triangles; deformed: the deformation's result.
+PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                                    const ExtractOptions& opt = {}, const Hooks& hooks = {});
+
+}  // namespace polycube::chart

@@ -1,0 +1,332 @@
+#include "polycube/chart/labeling.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <sstream>
+#include <unordered_map>
+
+#include "polycube/core/topology.h"
+
+namespace polycube::chart {
+
+namespace {
+
+int axis_of(int label) { return label / 2; }
+
+
+double edge_length(const MatX3d& X, int a, int b) { return (X.row(a) - X.row(b)).norm(); }
+
+constexpr int kMaxProblems = 20;
+
+void add_problem(ChartReport& r, const std::string& s) {
+  if (static_cast<int>(r.problems.size()) < kMaxProblems) r.problems.push_back(s);
+}
+
+}  // namespace
+
+int label_of(const Vec3& n) {
+  int axis = 0;
+  for (int k = 1; k < 3; ++k)
+    if (std::abs(n[k]) > std::abs(n[axis])) axis = k;
+  return 2 * axis + (n[axis] < 0 ? 1 : 0);
+}
+
+Vec3 label_direction(int label) {
+  Vec3 d = Vec3::Zero();
+  d[axis_of(label)] = label % 2 ? -1.0 : 1.0;
+  return d;
+}
+
+const char* label_name(int label) {
+  static const char* names[6] = {"+X", "-X", "+Y", "-Y", "+Z", "-Z"};
+  return label >= 0 && label < 6 ? names[label] : "?";
+}
+
+std::vector<int> label_by_normal(const MatX3d& X, const MatX3i& F) {
+  std::vector<int> l(F.rows());
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), c = X.row(F(f, 2));
+    l[f] = label_of((b - a).cross(c - a));
+  }
+  return l;
+}
+
+Charts build_charts(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels) {
+  const MatX3i N = face_adjacency(F);
+  Charts c;
+  c.of_face.assign(F.rows(), -1);
+  std::vector<int> stack;
+  for (int f0 = 0; f0 < F.rows(); ++f0) {
+    if (c.of_face[f0] >= 0) continue;
+    const int id = c.count();
+    c.label.push_back(labels[f0]);
+    c.faces.push_back(0);
+    c.area.push_back(0);
+    c.of_face[f0] = id;
+    stack.assign(1, f0);
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      c.faces[id]++;
+      const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), cc = X.row(F(f, 2));
+      c.area[id] += 0.5 * (b - a).cross(cc - a).norm();
+      for (int k = 0; k < 3; ++k) {
+        const int g = N(f, k);
+        if (g >= 0 && c.of_face[g] < 0 && labels[g] == labels[f0]) {
+          c.of_face[g] = id;
+          stack.push_back(g);
+        }
+      }
+    }
+  }
+  std::vector<std::map<int, double>> nb(c.count());
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int g = N(f, k);
+      if (g < 0 || c.of_face[g] == c.of_face[f]) continue;
+      nb[c.of_face[f]][c.of_face[g]] += edge_length(X, F(f, k), F(f, (k + 1) % 3));
+    }
+  c.neighbors.resize(c.count());
+  for (int i = 0; i < c.count(); ++i) c.neighbors[i].assign(nb[i].begin(), nb[i].end());
+  return c;
+}
+
+namespace {
+
+// Step 1: zigzag straightening, until stable. Returns triangles relabelled.
+int straighten(const MatX3i& N, std::vector<int>& labels) {
+  int changed = 0;
+  for (int pass = 0; pass < 100; ++pass) {
+    int here = 0;
+    for (int f = 0; f < N.rows(); ++f) {
+      int l[3];
+      for (int k = 0; k < 3; ++k) l[k] = N(f, k) >= 0 ? labels[N(f, k)] : -1;
+      for (int k = 0; k < 3; ++k) {
+        const int y = l[k];
+        if (y < 0 || y == labels[f]) continue;
+        if (y == l[(k + 1) % 3] || y == l[(k + 2) % 3]) {
+          labels[f] = y;
+          ++here;
+          break;
+        }
+      }
+    }
+    changed += here;
+    if (here == 0) break;
+  }
+  return changed;
+}
+
+// Step 2: a triangle whose three vertices all touch one edge-adjacent chart of another axis.
+int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector<int>& labels) {
+  const Charts c = build_charts(X, F, labels);
+  const int nv = static_cast<int>(X.rows());
+  std::vector<std::vector<int>> vcharts(nv);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      auto& v = vcharts[F(f, k)];
+      if (std::find(v.begin(), v.end(), c.of_face[f]) == v.end()) v.push_back(c.of_face[f]);
+    }
+  int changed = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const int own = c.of_face[f];
+    for (int k = 0; k < 3; ++k) {
+      const int g = N(f, k);
+      if (g < 0) continue;
+      const int other = c.of_face[g];
+      if (other == own || axis_of(c.label[other]) == axis_of(labels[f])) continue;
+      bool all = true;
+      for (int j = 0; j < 3 && all; ++j) {
+        const auto& v = vcharts[F(f, j)];
+        all = std::find(v.begin(), v.end(), other) != v.end();
+      }
+      if (all) {
+        labels[f] = c.label[other];
+        ++changed;
+        break;
+      }
+    }
+  }
+  return changed;
+}
+
+}  // namespace
+
+CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels, const CleanupOptions& opt) {
+  CleanupStats s;
+  const std::vector<int> initial = labels;
+  const MatX3i N = face_adjacency(F);
+  for (s.rounds = 0; s.rounds < opt.max_rounds; ++s.rounds) {
+    bool changed = false;
+    if (opt.straighten) {
+      const int z = straighten(N, labels);
+      s.zigzags += z;
+      changed |= z > 0;
+    }
+    if (opt.fix_degenerate) {
+      const int d = fix_degenerate(X, F, N, labels);
+      s.degenerate += d;
+      changed |= d > 0;
+    }
+    if (opt.remove_low_degree) {
+      // Remove the smallest chart of the lowest degree <= 3, then start over.
+      const Charts c = build_charts(X, F, labels);
+      int best = -1, best_deg = 4;
+      for (int i = 0; i < c.count(); ++i) {
+        const int deg = static_cast<int>(c.neighbors[i].size());
+        if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
+          best = i;
+          best_deg = deg;
+        }
+      }
+      if (best >= 0 && best_deg >= 1) {
+        // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
+        // avoiding the opposite label when another choice exists.
+        int to = -1;
+        double len = -1;
+        for (auto [n, l] : c.neighbors[best]) {
+          const bool opposite = (c.label[n] ^ 1) == c.label[best];
+          const double score = opposite ? l * 1e-6 : l;
+          if (score > len) {
+            len = score;
+            to = n;
+          }
+        }
+        for (int f = 0; f < F.rows(); ++f)
+          if (c.of_face[f] == best) labels[f] = c.label[to];
+        (best_deg == 1 ? s.degree1 : best_deg == 2 ? s.degree2 : s.degree3)++;
+        changed = true;
+      }
+    }
+    if (!changed) break;
+  }
+  for (size_t f = 0; f < labels.size(); ++f) s.relabelled_faces += labels[f] != initial[f];
+  return s;
+}
+
+ChartReport check_charts(const MatX3i& F, int nv, const std::vector<int>& labels) {
+  ChartReport r;
+  const MatX3i N = face_adjacency(F);
+  // Charts by connectivity only (positions are not needed here).
+  const Charts c = build_charts(MatX3d::Zero(nv, 3), F, labels);
+  r.charts = c.count();
+
+  // Border edges (each once, from the face with the smaller id) and vertex valence = number of
+  // border edges at the vertex (= chart changes around its fan).
+  struct Border {
+    int u, v, c1, c2;
+  };
+  std::vector<Border> border;
+  std::vector<int> valence(nv, 0);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int g = N(f, k);
+      if (g < 0 || g < f || c.of_face[g] == c.of_face[f]) continue;
+      const int u = F(f, k), v = F(f, (k + 1) % 3);
+      border.push_back({u, v, c.of_face[f], c.of_face[g]});
+      valence[u]++;
+      valence[v]++;
+    }
+  for (int v = 0; v < nv; ++v)
+    if (valence[v] >= 3) {
+      r.corners++;
+      if (static_cast<int>(r.corner_valence.size()) <= valence[v]) r.corner_valence.resize(valence[v] + 1, 0);
+      r.corner_valence[valence[v]]++;
+      if (valence[v] > 3) {
+        r.high_valence_corners++;
+        add_problem(r, "vertex " + std::to_string(v) + " is a corner of valence " + std::to_string(valence[v]) +
+                           " (polycube corners have 3 charts)");
+      }
+    }
+
+  // Opposite labels side by side.
+  for (int i = 0; i < c.count(); ++i)
+    for (auto [n, len] : c.neighbors[i])
+      if (n > i && (c.label[n] ^ 1) == c.label[i]) {
+        r.opposite_adjacent++;
+        add_problem(r, "charts " + std::to_string(i) + " (" + label_name(c.label[i]) + ") and " + std::to_string(n) +
+                           " (" + label_name(c.label[n]) + ") are adjacent with opposite labels");
+      }
+
+  // Chart edges: border edges joined at non-corner vertices, per chart pair.
+  {
+    UnionFind uf(border.size());
+    std::unordered_map<long long, int> first;  // (vertex, chart pair) -> border edge
+    for (size_t e = 0; e < border.size(); ++e) {
+      const auto& b = border[e];
+      const long long pair = static_cast<long long>(std::min(b.c1, b.c2)) * r.charts + std::max(b.c1, b.c2);
+      for (int v : {b.u, b.v}) {
+        if (valence[v] >= 3) continue;
+        const long long key = pair * nv + v;
+        auto [it, fresh] = first.emplace(key, static_cast<int>(e));
+        if (!fresh) uf.unite(static_cast<int>(e), it->second);
+      }
+    }
+    for (size_t e = 0; e < border.size(); ++e) r.chart_edges += uf.find(static_cast<int>(e)) == static_cast<int>(e);
+  }
+
+  // Topology of each chart: Euler characteristic and boundary loops (with their corners).
+  {
+    std::vector<int> cv(r.charts, 0), ce(r.charts, 0), cf(r.charts, 0);
+    std::unordered_map<long long, int> id;  // (chart, vertex) -> dense id
+    auto key_of = [&](int ch, int v) { return static_cast<long long>(ch) * nv + v; };
+    for (int f = 0; f < F.rows(); ++f) {
+      const int ch = c.of_face[f];
+      cf[ch]++;
+      for (int k = 0; k < 3; ++k) {
+        if (id.emplace(key_of(ch, F(f, k)), static_cast<int>(id.size())).second) cv[ch]++;
+        const int g = N(f, k);
+        // Count each chart-interior edge once (from the smaller face), border edges once per side.
+        if (g < 0 || c.of_face[g] != ch || g > f) ce[ch]++;
+      }
+    }
+    UnionFind uf(id.size());
+    std::vector<char> has_border(id.size(), 0);
+    for (const auto& b : border)
+      for (int ch : {b.c1, b.c2}) {
+        const int iu = id.at(key_of(ch, b.u)), iv = id.at(key_of(ch, b.v));
+        uf.unite(iu, iv);
+        has_border[iu] = has_border[iv] = 1;
+      }
+    // Loops per chart and corners per loop.
+    std::unordered_map<int, std::pair<int, int>> loop;  // root -> (chart, corners)
+    for (const auto& [key, i] : id) {
+      if (!has_border[i]) continue;
+      const int ch = static_cast<int>(key / nv), v = static_cast<int>(key % nv);
+      auto& l = loop[uf.find(i)];
+      l.first = ch;
+      l.second += valence[v] >= 3;
+    }
+    std::vector<int> loops(r.charts, 0);
+    for (const auto& [root, l] : loop) {
+      loops[l.first]++;
+      if (l.second < 4) {
+        r.loops_with_few_corners++;
+        add_problem(r, "chart " + std::to_string(l.first) + " (" + label_name(c.label[l.first]) +
+                           ") has a boundary loop with " + std::to_string(l.second) + " corners (at least 4 needed)");
+      }
+    }
+    for (int ch = 0; ch < r.charts; ++ch) {
+      const int chi = cv[ch] - ce[ch] + cf[ch];
+      const int b = loops[ch];
+      const int twice_genus = 2 - chi - b;
+      if (b == 1 && twice_genus == 0) continue;
+      if (b == 0 || twice_genus != 0) {
+        r.invalid_topology_charts++;
+        add_problem(r, "chart " + std::to_string(ch) + " (" + label_name(c.label[ch]) + ", " +
+                           std::to_string(c.faces[ch]) + " triangles) is not a planar region (Euler characteristic " +
+                           std::to_string(chi) + ", " + std::to_string(b) + " boundary loops)");
+      } else {
+        r.non_disk_charts++;
+      }
+    }
+  }
+  r.valid = r.opposite_adjacent == 0 && r.high_valence_corners == 0 && r.invalid_topology_charts == 0 &&
+            r.loops_with_few_corners == 0;
+  return r;
+}
+
+}  // namespace polycube::chart

@@ -1,0 +1,91 @@
+// Chart labelling and topological cleanup of a near-polycube surface (Huang et al. 2014, Section 4.1).
+//
+// Every boundary triangle gets the label of the dominant axis of its normal, code 0..5 = +X, -X,
+// +Y, -Y, +Z, -Z (core/types.h). A chart is a maximal edge-connected set of triangles with one
+// label. The cleanup relabels triangles so that the chart graph can be realized as a polycube:
+//   1. zigzag straightening: a triangle two of whose three neighbours carry another, common label
+//      takes that label;
+//   2. degenerate triangles: a triangle whose three vertices all lie on the border of one
+//      neighbouring chart of another axis would be flattened onto the chart edge line; it takes
+//      that chart's label;
+//   3. charts of degree 1 take the surrounding label, charts of degree 2 the label of the
+//      neighbour sharing the longest border, and (not in the paper, needed rarely) charts of
+//      degree 3, which can only have three corners, likewise; smallest charts first;
+// all repeated until nothing changes.
+//
+// Valid chart graph (check_charts): no two adjacent charts with opposite labels; every corner
+// (vertex where 3+ charts meet) of valence 3; every chart a planar region: a disk, or (on shapes
+// of genus > 0) a disk with holes such as the top face of a box with a through-hole, whose faces
+// are annuli; every chart boundary loop with at least 4 corners (a face of a polycube is a
+// rectilinear polygon).
+#pragma once
+#include <string>
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::chart {
+
+/// Label of a direction: the dominant axis of n and its sign (ties go to the lower axis).
+int label_of(const Vec3& n);
+/// Unit direction of a label.
+Vec3 label_direction(int label);
+/// "+X", "-X", ...
+const char* label_name(int label);
+
+/// Label of every triangle of (X, F) by the dominant axis of its normal.
+std::vector<int> label_by_normal(const MatX3d& X, const MatX3i& F);
+
+/// Charts of a labelled closed triangle mesh.
+struct Charts {
+  std::vector<int> of_face;                ///< chart id per triangle
+  std::vector<int> label;                  ///< label per chart
+  std::vector<int> faces;                  ///< triangle count per chart
+  std::vector<double> area;                ///< area per chart (on the positions given)
+  /// Per chart: (neighbour chart, shared border length), sorted by neighbour id.
+  std::vector<std::vector<std::pair<int, double>>> neighbors;
+  int count() const { return static_cast<int>(label.size()); }
+};
+
+/// Connected components of equally labelled triangles and their adjacency.
+Charts build_charts(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels);
+
+struct CleanupOptions {
+  bool straighten = true;        ///< zigzag straightening (step 1)
+  bool fix_degenerate = true;    ///< relabel triangles that would be flattened (step 2)
+  bool remove_low_degree = true; ///< remove charts of degree 1, 2 (and 3) (step 3)
+  int max_rounds = 1000;         ///< cap on relabelling rounds (each round removes one chart or more)
+};
+
+/// What the cleanup changed.
+struct CleanupStats {
+  int zigzags = 0;     ///< triangles relabelled by straightening
+  int degenerate = 0;  ///< triangles relabelled because they would be flattened
+  int degree1 = 0, degree2 = 0, degree3 = 0;  ///< charts removed, by degree
+  int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
+  int rounds = 0;
+};
+
+/// Cleans `labels` (one per triangle of F) in place. X: positions used for border lengths.
+CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels,
+                            const CleanupOptions& opt = {});
+
+/// Structure of the chart graph and its problems.
+struct ChartReport {
+  int charts = 0;
+  int corners = 0;       ///< vertices where 3 or more charts meet
+  int chart_edges = 0;   ///< border chains between corners (closed loops without corners count 1)
+  std::vector<int> corner_valence;  ///< histogram: [k] = corners where k charts meet (k >= 3)
+  int opposite_adjacent = 0;   ///< pairs of adjacent charts with opposite labels
+  int high_valence_corners = 0;///< corners of valence > 3
+  int non_disk_charts = 0;     ///< charts that are not disks (holes allowed, see header)
+  int invalid_topology_charts = 0;  ///< charts with handles (never a polycube face)
+  int loops_with_few_corners = 0;   ///< chart boundary loops with fewer than 4 corners
+  bool valid = false;          ///< none of the problems above except non-disk planar charts
+  std::vector<std::string> problems;  ///< the first problems found, each naming charts/vertices
+};
+
+/// Checks the chart graph of labelled triangles (closed, consistently oriented F over nv vertices).
+ChartReport check_charts(const MatX3i& F, int nv, const std::vector<int>& labels);
+
+}  // namespace polycube::chart

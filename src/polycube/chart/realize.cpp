@@ -1,0 +1,496 @@
+#include "polycube/chart/realize.h"
+
+#include <Eigen/CholmodSupport>
+#include <Eigen/SVD>
+#include <Eigen/Sparse>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <numeric>
+
+#include "polycube/chart/labeling.h"
+#include "polycube/core/topology.h"
+#include "polycube/deform/energies.h"
+
+namespace polycube::chart {
+
+namespace {
+
+using SpMat = Eigen::SparseMatrix<double>;
+using Cholmod = Eigen::CholmodDecomposition<SpMat, Eigen::Lower>;
+
+
+std::unique_ptr<Cholmod> make_solver() {
+  auto s = std::make_unique<Cholmod>();
+  s->cholmod().print = 0;
+  s->setMode(Eigen::CholmodSupernodalLLt);
+  return s;
+}
+
+// Tet Jacobian determinant (volume ratio) of rest -> X.
+double volume_ratio(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest, int t) {
+  Eigen::Matrix3d Ds;
+  for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(T(t, m + 1)) - X.row(T(t, 0))).transpose();
+  return (Ds * rest.Dm_inv[t]).determinant();
+}
+
+int count_inverted(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest) {
+  int n = 0;
+  for (int t = 0; t < T.rows(); ++t) n += !(volume_ratio(X, T, rest, t) > 0);
+  return n;
+}
+
+// Planes: per axis, the plane (group of charts) of every vertex, -1 for none.
+struct Planes {
+  std::vector<int> of_vertex[3];
+  int count[3] = {0, 0, 0};
+  std::vector<double> height[3];
+};
+
+// The problem in reduced variables: per axis, variable of every vertex, and the ARAP Hessian.
+struct Reduced {
+  std::vector<int> var[3];
+  int nvar[3] = {0, 0, 0};
+  int nfree[3] = {0, 0, 0};
+};
+
+class Realizer {
+ public:
+  Realizer(MatX3d rest, MatX4i T, const Planes& planes, const RealizeOptions& opt,
+           const Hooks& hooks)
+      : rest_(std::move(rest)), T_(std::move(T)), planes_(planes), opt_(opt), hooks_(hooks) {
+    arap_rest_ = deform::ArapRest::build(rest_, T_);
+    const int n = static_cast<int>(rest_.rows());
+    for (int k = 0; k < 3; ++k) {
+      auto& var = red_.var[k];
+      var.assign(n, -1);
+      int nf = 0;
+      for (int v = 0; v < n; ++v)
+        if (planes_.of_vertex[k][v] < 0) var[v] = nf++;
+      for (int v = 0; v < n; ++v)
+        if (planes_.of_vertex[k][v] >= 0) var[v] = nf + planes_.of_vertex[k][v];
+      red_.nfree[k] = nf;
+      red_.nvar[k] = nf + planes_.count[k];
+    }
+    // Constant ARAP Hessian per axis: sum_t w_t B B^T, in reduced variables.
+    for (int k = 0; k < 3; ++k) {
+      std::vector<Eigen::Triplet<double>> trip;
+      trip.reserve(16 * T_.rows() + red_.nvar[k]);
+      double diag = 0;
+      for (int t = 0; t < T_.rows(); ++t) {
+        const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
+        Eigen::Matrix<double, 4, 3> Bm;
+        Bm.bottomRows<3>() = Di;
+        Bm.row(0) = -Di.colwise().sum();
+        const Eigen::Matrix4d Ke = arap_rest_.w[t] * Bm * Bm.transpose();
+        for (int p = 0; p < 4; ++p)
+          for (int q = 0; q < 4; ++q) {
+            const int a = red_.var[k][T_(t, p)], b = red_.var[k][T_(t, q)];
+            if (a >= b) trip.emplace_back(a, b, Ke(p, q));
+          }
+        diag += Ke.trace();
+      }
+      // Translations along k are free: a tiny diagonal makes the system definite.
+      const double reg = 1e-10 * diag / std::max(1, red_.nvar[k]);
+      for (int i = 0; i < red_.nvar[k]; ++i) trip.emplace_back(i, i, reg);
+      SpMat K(red_.nvar[k], red_.nvar[k]);
+      K.setFromTriplets(trip.begin(), trip.end());
+      solver_[k] = make_solver();
+      solver_[k]->compute(K);
+      ok_ = ok_ && solver_[k]->info() == Eigen::Success;
+    }
+  }
+
+  bool ok() const { return ok_; }
+  const MatX3d& rest() const { return rest_; }
+  const MatX4i& T() const { return T_; }
+  const deform::ArapRest& arap_rest() const { return arap_rest_; }
+
+  // The step -K^-1 g in reduced variables, expanded to every vertex.
+  MatX3d newton_step(const Eigen::VectorXd& g) const {
+    const int n = static_cast<int>(rest_.rows());
+    MatX3d d(n, 3);
+    for (int k = 0; k < 3; ++k) {
+      Eigen::VectorXd gk = Eigen::VectorXd::Zero(red_.nvar[k]);
+      for (int v = 0; v < n; ++v) gk[red_.var[k][v]] += g[3 * v + k];
+      const Eigen::VectorXd dk = solver_[k]->solve(-gk);
+      for (int v = 0; v < n; ++v) d(v, k) = dk[red_.var[k][v]];
+    }
+    return d;
+  }
+
+  // ARAP + near-flat barrier; +inf if a tet is inverted (when `barrier`).
+  double energy(const MatX3d& X, Eigen::VectorXd* g, bool barrier) const {
+    if (g) g->setZero(3 * X.rows());
+    double E = deform::arap_energy(X, T_, arap_rest_, 1.0, g, nullptr);
+    if (!barrier) return E;
+    for (int t = 0; t < T_.rows(); ++t) {
+      Eigen::Matrix3d Ds;
+      const int v[4] = {T_(t, 0), T_(t, 1), T_(t, 2), T_(t, 3)};
+      for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(v[m + 1]) - X.row(v[0])).transpose();
+      const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
+      const Eigen::Matrix3d F = Ds * Di;
+      const double J = F.determinant();
+      if (!(J > 0)) return std::numeric_limits<double>::infinity();
+      if (J >= tau_) continue;
+      const double l = std::log(J / tau_);
+      const double w = opt_.barrier_weight * arap_rest_.w[t];
+      E += w * l * l;
+      if (g) {
+        const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
+        Eigen::Matrix<double, 4, 3> Bm;
+        Bm.bottomRows<3>() = Di;
+        Bm.row(0) = -Di.colwise().sum();
+        const double c = 2 * w * l / J;
+        for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += c * dJdF * Bm.row(p).transpose();
+      }
+    }
+    return E;
+  }
+
+  // Local/global ARAP steps while tets are inverted. Returns the steps taken; X updated.
+  int untangle(MatX3d& X, int& inverted) const {
+    inverted = count_inverted(X, T_, arap_rest_);
+    int it = 0;
+    Eigen::VectorXd g;
+    for (; inverted > 0 && it < opt_.untangle_iterations; ++it) {
+      energy(X, &g, false);
+      X += newton_step(g);
+      inverted = count_inverted(X, T_, arap_rest_);
+    }
+    return it;
+  }
+
+  // ARAP minimization from a tangle-free X. Returns iterations.
+  int minimize(MatX3d& X) {
+    std::vector<double> J(T_.rows());
+    for (int t = 0; t < T_.rows(); ++t) J[t] = volume_ratio(X, T_, arap_rest_, t);
+    std::nth_element(J.begin(), J.begin() + J.size() / 2, J.end());
+    tau_ = opt_.barrier_threshold * J[J.size() / 2];
+    Eigen::VectorXd g, gt;
+    double E = energy(X, &g, true);
+    int it = 0;
+    for (; it < opt_.max_iterations && std::isfinite(E); ++it) {
+      const MatX3d d = newton_step(g);
+      const double slope = Eigen::Map<const Eigen::VectorXd>(d.data(), d.size()).dot(g);
+      if (!(slope < 0)) break;
+      double s = 1, Et = E;
+      MatX3d Xt;
+      bool accepted = false;
+      for (int ls = 0; ls < 40; ++ls, s *= 0.5) {
+        Xt = X + s * d;
+        Et = energy(Xt, &gt, true);
+        if (Et <= E + 1e-4 * s * slope) {
+          accepted = true;
+          break;
+        }
+      }
+      if (!accepted) break;
+      const double decrease = E - Et;
+      X = std::move(Xt);
+      g = gt;
+      E = Et;
+      if (decrease < opt_.tolerance * E) {
+        ++it;
+        break;
+      }
+      hooks_.report("polycube", 0.3 + 0.6 * it / opt_.max_iterations);
+    }
+    return it;
+  }
+
+ private:
+  MatX3d rest_;
+  MatX4i T_;
+  const Planes& planes_;
+  const RealizeOptions& opt_;
+  const Hooks& hooks_;
+  deform::ArapRest arap_rest_;
+  Reduced red_;
+  std::unique_ptr<Cholmod> solver_[3];
+  bool ok_ = true;
+  double tau_ = 0;
+};
+
+// Eq. 17 with the plane heights fixed: per axis, minimize the weighted sum of squared uniform
+// Laplacians (boundary vertices over their surface neighbours, interior ones over their tet
+// neighbours) over the unconstrained coordinates.
+bool relax_eq17(const MatX3i& B, const MatX4i& T, const Planes& planes, MatX3d& X) {
+  const int n = static_cast<int>(X.rows());
+  std::vector<char> on_boundary(n, 0);
+  for (int f = 0; f < B.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary[B(f, k)] = 1;
+  const auto nb_s = vertex_neighbors(n, unique_edges(B));
+  const auto nb_t = vertex_neighbors(n, unique_edges(T));
+  int nb = 0;
+  for (char c : on_boundary) nb += c;
+  const double wb = 1.0 / std::sqrt(std::max(1, nb)), wi = 1.0 / std::sqrt(std::max(1, n - nb));
+  for (int k = 0; k < 3; ++k) {
+    std::vector<int> fidx(n, -1);
+    int nf = 0;
+    for (int v = 0; v < n; ++v)
+      if (planes.of_vertex[k][v] < 0) fidx[v] = nf++;
+    if (nf == 0) continue;
+    std::vector<Eigen::Triplet<double>> trip;
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(n);
+    for (int i = 0; i < n; ++i) {
+      const auto& N = on_boundary[i] ? nb_s[i] : nb_t[i];
+      if (N.empty()) continue;
+      const double w = on_boundary[i] ? wb : wi;
+      auto put = [&](int v, double c) {
+        if (fidx[v] >= 0) trip.emplace_back(i, fidx[v], w * c);
+        else rhs[i] -= w * c * planes.height[k][planes.of_vertex[k][v]];
+      };
+      put(i, 1.0);
+      for (int j : N) put(j, -1.0 / static_cast<double>(N.size()));
+    }
+    SpMat A(n, nf);
+    A.setFromTriplets(trip.begin(), trip.end());
+    const SpMat AtA = (A.transpose() * A).triangularView<Eigen::Lower>();
+    auto solver = make_solver();
+    solver->compute(AtA);
+    if (solver->info() != Eigen::Success) return false;
+    const Eigen::VectorXd y = solver->solve(A.transpose() * rhs);
+    for (int v = 0; v < n; ++v)
+      X(v, k) = fidx[v] >= 0 ? y[fidx[v]] : planes.height[k][planes.of_vertex[k][v]];
+  }
+  return X.allFinite();
+}
+
+}  // namespace
+
+Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T) {
+  Distortion d;
+  d.min = std::numeric_limits<double>::infinity();
+  double wsum = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    Eigen::Matrix3d Dm, Ds;
+    for (int m = 0; m < 3; ++m) {
+      Dm.col(m) = (rest.row(T(t, m + 1)) - rest.row(T(t, 0))).transpose();
+      Ds.col(m) = (X.row(T(t, m + 1)) - X.row(T(t, 0))).transpose();
+    }
+    const Vec3 s = Eigen::JacobiSVD<Eigen::Matrix3d>(Ds * Dm.inverse()).singularValues();
+    const double iso = s[2] > 0 ? std::max(s[0], 1.0 / s[2]) : std::numeric_limits<double>::infinity();
+    d.min = std::min(d.min, iso);
+    d.max = std::max(d.max, iso);
+    const double w = std::abs(Dm.determinant());
+    d.mean += w * iso;
+    wsum += w;
+  }
+  d.mean = wsum > 0 ? d.mean / wsum : 0;
+  if (T.rows() == 0) d.min = 0;
+  return d;
+}
+
+RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
+                               const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
+  Stopwatch sw;
+  RealizeResult r;
+  auto fail = [&](const std::string& why) {
+    r.success = false;
+    r.failure = why;
+    r.seconds = sw.seconds();
+    return r;
+  };
+  hooks.report("polycube", 0.0);
+  int n = static_cast<int>(rest_in.rows());
+
+  // ---- planes ----
+  const Charts charts = build_charts(deformed, B, labels);
+  std::vector<std::vector<int>> vcharts(n);
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) {
+      auto& l = vcharts[B(f, j)];
+      const int c = charts.of_face[f];
+      if (std::find(l.begin(), l.end(), c) == l.end()) l.push_back(c);
+    }
+  Planes planes;
+  for (int k = 0; k < 3; ++k) {
+    UnionFind uf(charts.count());
+    for (int v = 0; v < n; ++v) {
+      int first = -1;
+      for (int c : vcharts[v])
+        if (charts.label[c] / 2 == k) {
+          if (first >= 0) uf.unite(c, first);
+          first = c;
+        }
+    }
+    std::vector<int> id(charts.count(), -1);
+    std::vector<int> label_of_plane;
+    for (int c = 0; c < charts.count(); ++c) {
+      if (charts.label[c] / 2 != k) continue;
+      const int root = uf.find(c);
+      if (id[root] < 0) {
+        id[root] = planes.count[k]++;
+        label_of_plane.push_back(charts.label[c]);
+      } else if (label_of_plane[id[root]] != charts.label[c]) {
+        // Find a vertex where opposite charts of this plane meet, for the message.
+        for (int v = 0; v < n; ++v)
+          for (int a : vcharts[v])
+            for (int b : vcharts[v])
+              if (charts.label[a] / 2 == k && charts.label[b] == (charts.label[a] ^ 1) && uf.find(a) == root)
+                return fail("charts " + std::to_string(a) + " (" + label_name(charts.label[a]) + ") and " +
+                            std::to_string(b) + " (" + label_name(charts.label[b]) + ") meet at vertex " +
+                            std::to_string(v) + ": the polycube would have zero thickness there");
+        return fail(std::string("opposite charts of axis ") + "XYZ"[k] + " share a plane");
+      }
+      id[c] = id[root];
+    }
+    for (int c = 0; c < charts.count(); ++c)
+      if (charts.label[c] / 2 == k) id[c] = id[uf.find(c)];
+    planes.of_vertex[k].assign(n, -1);
+    for (int v = 0; v < n; ++v)
+      for (int c : vcharts[v])
+        if (charts.label[c] / 2 == k) planes.of_vertex[k][v] = id[c];
+    // Heights: mean deformed coordinate of the plane's vertices.
+    planes.height[k].assign(planes.count[k], 0.0);
+    std::vector<int> cnt(planes.count[k], 0);
+    for (int v = 0; v < n; ++v)
+      if (planes.of_vertex[k][v] >= 0) {
+        planes.height[k][planes.of_vertex[k][v]] += deformed(v, k);
+        cnt[planes.of_vertex[k][v]]++;
+      }
+    for (int p = 0; p < planes.count[k]; ++p) planes.height[k][p] /= std::max(1, cnt[p]);
+    r.planes[k] = planes.count[k];
+    if (planes.count[k] < 2) return fail(std::string("fewer than two planes normal to ") + "XYZ"[k]);
+  }
+
+  // ---- split interior edges whose ends lie on one plane ----
+  MatX3d rest = rest_in, def = deformed;
+  MatX4i T = T_in;
+  {
+    const auto bedges = unique_edges(B);
+    auto same_plane = [&](int u, int v) {
+      for (int k = 0; k < 3; ++k)
+        if (planes.of_vertex[k][u] >= 0 && planes.of_vertex[k][u] == planes.of_vertex[k][v]) return true;
+      return false;
+    };
+    for (int round = 0; round < 20; ++round) {
+      std::vector<std::pair<int, int>> cand;
+      for (auto e : unique_edges(T))
+        if (same_plane(e.first, e.second) && !std::binary_search(bedges.begin(), bedges.end(), e)) cand.push_back(e);
+      if (cand.empty()) break;
+      std::vector<std::vector<int>> tets(cand.size());
+      for (int t = 0; t < T.rows(); ++t)
+        for (int i = 0; i < 4; ++i)
+          for (int j = i + 1; j < 4; ++j) {
+            const std::pair<int, int> e(std::min(T(t, i), T(t, j)), std::max(T(t, i), T(t, j)));
+            auto it = std::lower_bound(cand.begin(), cand.end(), e);
+            if (it != cand.end() && *it == e) tets[it - cand.begin()].push_back(t);
+          }
+      std::vector<char> used(T.rows(), 0);
+      std::vector<std::array<int, 4>> added;
+      std::vector<Vec3> new_rest, new_def;
+      for (size_t e = 0; e < cand.size(); ++e) {
+        bool free = true;
+        for (int t : tets[e]) free = free && !used[t];
+        if (!free) continue;
+        const int m = n + static_cast<int>(new_rest.size());
+        const auto [u, v] = cand[e];
+        new_rest.push_back(0.5 * (rest.row(u) + rest.row(v)).transpose());
+        new_def.push_back(0.5 * (def.row(u) + def.row(v)).transpose());
+        for (int t : tets[e]) {
+          used[t] = 1;
+          std::array<int, 4> a{T(t, 0), T(t, 1), T(t, 2), T(t, 3)}, b = a;
+          for (int i = 0; i < 4; ++i) {
+            if (a[i] == v) a[i] = m;
+            if (b[i] == u) b[i] = m;
+          }
+          for (int i = 0; i < 4; ++i) T(t, i) = a[i];
+          added.push_back(b);
+        }
+        r.split_edges++;
+      }
+      const int nt = static_cast<int>(T.rows());
+      T.conservativeResize(nt + static_cast<Eigen::Index>(added.size()), 4);
+      for (size_t i = 0; i < added.size(); ++i)
+        for (int j = 0; j < 4; ++j) T(nt + static_cast<Eigen::Index>(i), j) = added[i][j];
+      const int nn = n + static_cast<int>(new_rest.size());
+      rest.conservativeResize(nn, 3);
+      def.conservativeResize(nn, 3);
+      for (size_t i = 0; i < new_rest.size(); ++i) {
+        rest.row(n + static_cast<Eigen::Index>(i)) = new_rest[i].transpose();
+        def.row(n + static_cast<Eigen::Index>(i)) = new_def[i].transpose();
+      }
+      for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
+      n = nn;
+    }
+  }
+  if (r.split_edges > 0) hooks.debug("split " + std::to_string(r.split_edges) + " interior edges lying on a plane");
+  hooks.report("polycube", 0.1);
+
+  Realizer solver(rest, T, planes, opt, hooks);
+  if (!solver.ok()) return fail("the ARAP system of the realization is not positive definite");
+
+  // ---- starts ----
+  std::vector<std::string> starts;
+  if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
+  if (opt.start == "projected" || opt.start == "auto") starts.push_back("projected");
+  if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (eq17, projected, auto)");
+  bool have = false;
+  std::string last_failure;
+  for (const auto& name : starts) {
+    MatX3d X = def;
+    if (name == "eq17") {
+      if (!relax_eq17(B, T, planes, X)) {
+        last_failure = "the relaxation of Eq. 17 failed";
+        continue;
+      }
+    } else {
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v)
+          if (planes.of_vertex[k][v] >= 0) X(v, k) = planes.height[k][planes.of_vertex[k][v]];
+    }
+    int inverted = 0;
+    const int ut = solver.untangle(X, inverted);
+    if (inverted > 0) {
+      hooks.debug("realization from the " + name + " start: " + std::to_string(inverted) +
+                  " tets still inverted after " + std::to_string(ut) + " untangling steps");
+      last_failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
+                     " untangling steps (start: " + name + ")";
+      continue;
+    }
+    const int it = solver.minimize(X);
+    const double arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
+    hooks.debug("realization from the " + name + " start: ARAP " + std::to_string(arap) + " after " +
+                std::to_string(ut) + " untangling and " + std::to_string(it) + " ARAP iterations");
+    if (!have || arap < r.arap) {
+      have = true;
+      r.X = std::move(X);
+      r.arap = arap;
+      r.start = name;
+      r.untangle_iterations = ut;
+      r.iterations = it;
+    }
+  }
+  if (!have) return fail(last_failure);
+  hooks.report("polycube", 0.95);
+
+  // ---- checks ----
+  r.rest = std::move(rest);
+  r.T = std::move(T);
+  r.inverted = count_inverted(r.X, r.T, solver.arap_rest());
+  const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+  for (int f = 0; f < B.rows(); ++f) {
+    const int k = labels[f] / 2;
+    double lo = r.X(B(f, 0), k), hi = lo;
+    for (int j = 1; j < 3; ++j) {
+      lo = std::min(lo, r.X(B(f, j), k));
+      hi = std::max(hi, r.X(B(f, j), k));
+    }
+    r.planarity_error = std::max(r.planarity_error, (hi - lo) / diag);
+    const Vec3 N = deform::area_normal(r.X, B(f, 0), B(f, 1), B(f, 2));
+    if (!(N.dot(label_direction(labels[f])) > 1e-14 * diag * diag)) r.misoriented_faces++;
+  }
+  r.isometric = isometric_distortion(r.rest, r.X, r.T);
+  r.seconds = sw.seconds();
+  hooks.report("polycube", 1.0);
+  if (r.inverted > 0) return fail(std::to_string(r.inverted) + " tets are inverted in the polycube");
+  if (r.misoriented_faces > 0)
+    return fail(std::to_string(r.misoriented_faces) + " boundary triangles do not face their chart's direction");
+  r.success = true;
+  return r;
+}
+
+}  // namespace polycube::chart

@@ -1,0 +1,72 @@
+// Realization of an exact polycube from a labelled near-polycube tet mesh (Huang et al. 2014,
+// end of Section 4.1).
+//
+// Every boundary vertex of a chart with axis k shares one coordinate x_k = h with the rest of its
+// "plane": the union of the charts of axis k that touch it (charts of one axis meeting at a vertex
+// must lie in one plane). These linear constraints are removed by substitution: per axis, the
+// unknowns are the plane heights and the coordinates of unconstrained vertices, so the result is
+// planar to the last bit. Then:
+//   1. start: the valence-weighted relaxation of Eq. 17 with the heights taken from the deformed
+//      mesh (a sparse least-squares solve per axis), or the deformed mesh with its boundary vertices
+//      projected on their planes ("projected");
+//   2. untangling: plain ARAP local/global steps while tets are inverted;
+//   3. ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
+//      search that keeps every tet positive, and a barrier that only acts on nearly flat tets.
+// Interior tet edges whose two ends lie on one plane would have to lie in the polycube's face: they
+// are split at their midpoint first (new interior vertices, appended).
+#pragma once
+#include <string>
+#include <vector>
+
+#include "polycube/core/log.h"
+#include "polycube/core/types.h"
+
+namespace polycube::chart {
+
+struct RealizeOptions {
+  /// "eq17" (the paper), "projected", or "auto": eq17, then projected if eq17 cannot be untangled
+  /// or ends with a higher ARAP distortion than projected would (both are tried).
+  std::string start = "auto";
+  int max_iterations = 200;       ///< ARAP Newton iterations at most
+  double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively
+  int untangle_iterations = 300;  ///< local/global steps at most to remove inverted tets
+  /// Barrier weight (relative to ARAP) on tets whose volume ratio det(F) falls below
+  /// barrier_threshold times its median: (log(J / threshold))^2 below the threshold, 0 above.
+  double barrier_weight = 1e-2;
+  double barrier_threshold = 0.05;
+};
+
+/// Isometric distortion max(s1, 1/s3) of the map from the rest tets to the polycube tets.
+struct Distortion {
+  double min = 0, mean = 0, max = 0;
+};
+
+struct RealizeResult {
+  bool success = false;
+  std::string failure;           ///< why, when !success
+  MatX3d rest;                   ///< rest positions: the input tet mesh plus the split-edge midpoints
+  MatX4i T;                      ///< tets over `rest` / `X` (the input tets, some split)
+  MatX3d X;                      ///< polycube positions
+  int split_edges = 0;           ///< interior edges split because both ends lie on one plane
+  std::string start;             ///< start used ("eq17" or "projected")
+  int untangle_iterations = 0, iterations = 0;
+  double arap = 0;               ///< volume-weighted mean ARAP distortion (Eq. 6) of the polycube map
+  Distortion isometric;
+  int inverted = 0;              ///< tets with non-positive volume in X
+  double planarity_error = 0;    ///< max over boundary triangles of their extent along their label axis / bbox diagonal
+  int misoriented_faces = 0;     ///< boundary triangles not facing their label's direction (or of zero area)
+  int planes[3] = {0, 0, 0};     ///< distinct planes per axis
+  double seconds = 0;
+};
+
+/// Realizes the polycube. rest/T/B: the tet mesh and its outward boundary triangles; deformed: the
+/// deformed positions (axis-aligned frame); labels: one per row of B, cleaned (see labeling.h).
+/// Never throws for a geometric failure: returns success = false with the reason.
+RealizeResult realize_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                               const std::vector<int>& labels, const RealizeOptions& opt = {},
+                               const Hooks& hooks = {});
+
+/// Isometric distortion statistics of the map rest -> X over tets T.
+Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);
+
+}  // namespace polycube::chart

@@ -1,0 +1,47 @@
+#include "polycube/core/topology.h"
+
+#include <algorithm>
+#include <array>
+
+namespace polycube {
+
+MatX3i face_adjacency(const MatX3i& F) {
+  // Directed edges sorted by (from, to); the twin of (a, b) is (b, a).
+  std::vector<std::array<int, 3>> he;  // from, to, face*3+k
+  he.reserve(3 * F.rows());
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) he.push_back({F(f, k), F(f, (k + 1) % 3), 3 * f + k});
+  std::sort(he.begin(), he.end());
+  MatX3i N = MatX3i::Constant(F.rows(), 3, -1);
+  for (const auto& h : he) {
+    const std::array<int, 3> key{h[1], h[0], -1};
+    auto it = std::lower_bound(he.begin(), he.end(), key);
+    if (it != he.end() && (*it)[0] == h[1] && (*it)[1] == h[0]) N(h[2] / 3, h[2] % 3) = (*it)[2] / 3;
+  }
+  return N;
+}
+
+std::vector<std::pair<int, int>> unique_edges(
+    const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>& E) {
+  std::vector<std::pair<int, int>> e;
+  const int n = static_cast<int>(E.cols());
+  e.reserve(E.rows() * n * (n - 1) / 2);
+  for (int r = 0; r < E.rows(); ++r)
+    for (int i = 0; i < n; ++i)
+      for (int j = i + 1; j < n; ++j) e.emplace_back(std::min(E(r, i), E(r, j)), std::max(E(r, i), E(r, j)));
+  std::sort(e.begin(), e.end());
+  e.erase(std::unique(e.begin(), e.end()), e.end());
+  return e;
+}
+
+std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pair<int, int>>& edges) {
+  std::vector<std::vector<int>> nb(nv);
+  for (auto [a, b] : edges) {
+    nb[a].push_back(b);
+    nb[b].push_back(a);
+  }
+  for (auto& l : nb) std::sort(l.begin(), l.end());
+  return nb;
+}
+
+}  // namespace polycube

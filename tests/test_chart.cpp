@@ -1,0 +1,194 @@
+// Chart labelling, cleanup and exact polycube realization on shapes with known answers.
+#include <random>
+
+#include "polycube/chart/extract.h"
+#include "polycube/deform/solver.h"
+#include "polycube/examples/examples.h"
+#include "polycube/validate/tetmesh.h"
+#include "test_util.h"
+
+using namespace polycube;
+using namespace polycube::test;
+
+namespace {
+
+// Exact planarity: every boundary triangle has one coordinate along its label's axis.
+double max_planarity_spread(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels) {
+  double e = 0;
+  for (int f = 0; f < B.rows(); ++f) {
+    const int k = labels[f] / 2;
+    for (int j = 1; j < 3; ++j) e = std::max(e, std::abs(X(B(f, j), k) - X(B(f, 0), k)));
+  }
+  return e;
+}
+
+chart::PolycubeExtraction deform_and_extract(const TetMesh& tm, double* l1 = nullptr) {
+  auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  if (l1) *l1 = d.l1_quality;
+  return chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X);
+}
+
+void expect_exact_polycube(const chart::PolycubeExtraction& e, const TetMesh& tm) {
+  ASSERT_TRUE(e.realized.success) << e.realized.failure;
+  EXPECT_EQ(max_planarity_spread(e.realized.X, tm.boundary, e.labels), 0.0);
+  EXPECT_EQ(e.realized.planarity_error, 0.0);
+  EXPECT_EQ(e.realized.misoriented_faces, 0);
+  EXPECT_EQ(e.realized.inverted, 0);
+  // Every tet positive in both meshes.
+  EXPECT_EQ(measure_tets(e.realized.rest, e.realized.T).inverted, 0);
+  EXPECT_EQ(measure_tets(e.realized.X, e.realized.T).inverted, 0);
+  EXPECT_EQ(measure_tets(e.realized.X, e.realized.T).zero_volume, 0);
+  // The boundary is untouched by edge splits: same vertices at the same rest positions.
+  EXPECT_EQ((e.realized.rest.topRows(tm.V.rows()) - tm.V).cwiseAbs().maxCoeff(), 0.0);
+}
+
+}  // namespace
+
+TEST(Chart, LabelCode) {
+  EXPECT_EQ(chart::label_of(Vec3(0.9, 0.1, -0.2)), kPosX);
+  EXPECT_EQ(chart::label_of(Vec3(0.1, -0.9, 0.2)), kNegY);
+  EXPECT_EQ(chart::label_of(Vec3(0.1, 0.3, -0.4)), kNegZ);
+  for (int l = 0; l < 6; ++l) EXPECT_EQ(chart::label_of(chart::label_direction(l)), l);
+  EXPECT_STREQ(chart::label_name(kPosZ), "+Z");
+}
+
+TEST(Chart, BoxHasSixChartsEightCornersTwelveEdges) {
+  for (auto s : {box(), grid_box(4)}) {
+    const auto labels = chart::label_by_normal(s.V, s.F);
+    const auto r = chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels);
+    EXPECT_EQ(r.charts, 6);
+    EXPECT_EQ(r.corners, 8);
+    EXPECT_EQ(r.chart_edges, 12);
+    ASSERT_GE(r.corner_valence.size(), 4u);
+    EXPECT_EQ(r.corner_valence[3], 8);
+    EXPECT_TRUE(r.valid);
+    EXPECT_EQ(r.non_disk_charts, 0);
+  }
+}
+
+TEST(Chart, LBlockHasEightChartsTwelveCorners) {
+  MeshData l = examples::make("l_bracket", 0.1);
+  const auto labels = chart::label_by_normal(l.V, l.F);
+  const auto r = chart::check_charts(l.F, static_cast<int>(l.V.rows()), labels);
+  EXPECT_EQ(r.charts, 8);
+  EXPECT_EQ(r.corners, 12);
+  EXPECT_EQ(r.chart_edges, 18);
+  EXPECT_TRUE(r.valid);
+}
+
+TEST(Chart, CleanupStraightensAZigzag) {
+  auto s = grid_box(6);
+  const auto good = chart::label_by_normal(s.V, s.F);
+  auto labels = good;
+  // A +Z triangle on the +X border (away from corners), relabelled +X: a zigzag.
+  int f0 = -1;
+  for (int f = 0; f < s.F.rows() && f0 < 0; ++f) {
+    if (good[f] != kPosZ) continue;
+    const double y = (s.V(s.F(f, 0), 1) + s.V(s.F(f, 1), 1) + s.V(s.F(f, 2), 1)) / 3;
+    if (y < 0.2 || y > 0.8) continue;  // away from the corners
+    int on_x = 0;
+    for (int j = 0; j < 3; ++j) on_x += s.V(s.F(f, j), 0) == 1.0;
+    if (on_x == 2) f0 = f;
+  }
+  ASSERT_GE(f0, 0);
+  labels[f0] = kPosX;
+  const auto st = chart::cleanup_labels(s.V, s.F, labels);
+  EXPECT_GE(st.zigzags, 1);
+  EXPECT_EQ(labels, good);
+  EXPECT_EQ(st.relabelled_faces, 1);
+}
+
+TEST(Chart, CleanupRemovesIslandsAndWedges) {
+  auto s = grid_box(8);
+  const auto good = chart::label_by_normal(s.V, s.F);
+  auto labels = good;
+  // An island (degree 1) in the middle of +Z, and a wedge (degree 2) on the +Z/+X border.
+  for (int f = 0; f < s.F.rows(); ++f) {
+    Vec3 c = (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3;
+    if (good[f] == kPosZ && std::abs(c.x() - 0.5) < 0.2 && std::abs(c.y() - 0.5) < 0.2) labels[f] = kPosY;
+    if (good[f] == kPosZ && c.x() > 0.75 && std::abs(c.y() - 0.5) < 0.2) labels[f] = kNegY;
+  }
+  EXPECT_GT(chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels).charts, 6);
+  const auto st = chart::cleanup_labels(s.V, s.F, labels);
+  EXPECT_GE(st.degree1 + st.degree2 + st.zigzags, 2);
+  const auto r = chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels);
+  EXPECT_EQ(r.charts, 6);
+  EXPECT_EQ(r.corners, 8);
+  EXPECT_TRUE(r.valid);
+  EXPECT_EQ(labels, good);
+}
+
+TEST(Chart, OppositeChartsSideBySideAreReported) {
+  auto s = grid_box(4);
+  auto labels = chart::label_by_normal(s.V, s.F);
+  for (int f = 0; f < s.F.rows(); ++f)
+    if (labels[f] == kPosZ && s.V(s.F(f, 0), 0) + s.V(s.F(f, 1), 0) + s.V(s.F(f, 2), 0) < 1.5) labels[f] = kNegZ;
+  const auto r = chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels);
+  EXPECT_FALSE(r.valid);
+  EXPECT_GE(r.opposite_adjacent, 1);
+  ASSERT_FALSE(r.problems.empty());
+  EXPECT_NE(r.problems[0].find("opposite"), std::string::npos) << r.problems[0];
+}
+
+TEST(Realize, PerturbedBoxBecomesTheBoxAgain) {
+  auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-0.01, 0.01);
+  MatX3d D = tm.V;
+  for (int i = 0; i < D.rows(); ++i)
+    for (int k = 0; k < 3; ++k) D(i, k) += u(rng);
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, D);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.charts.charts, 6);
+  EXPECT_EQ(e.charts.corners, 8);
+  EXPECT_LT(e.realized.arap, 1e-6);
+  EXPECT_LT(e.realized.isometric.max, 1.01);
+  EXPECT_GE(e.realized.isometric.min, 1.0 - 1e-12);
+  // Up to a translation, the realized polycube is the box.
+  const Vec3 size = e.realized.X.colwise().maxCoeff() - e.realized.X.colwise().minCoeff();
+  EXPECT_NEAR(size.x(), 1, 1e-3);
+  EXPECT_NEAR(size.y(), 2, 1e-3);
+  EXPECT_NEAR(size.z(), 3, 1e-3);
+}
+
+TEST(Realize, SphereGivesAnExactSixChartPolycube) {
+  auto s = sphere(3, Vec3(1, 2, 3), 2.0);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 4000);
+  const auto e = deform_and_extract(tm);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.charts.charts, 6);
+  EXPECT_EQ(e.charts.corners, 8);
+  EXPECT_TRUE(e.charts.valid);
+  EXPECT_LT(e.realized.arap, 0.15);
+}
+
+TEST(Realize, LBlockUnderRandomRotationsKeepsTwelveCorners) {
+  MeshData l = examples::make("l_bracket", 0.08);
+  std::mt19937 rng(11);
+  std::normal_distribution<double> g;
+  for (int k = 0; k < 3; ++k) {
+    Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
+    q.normalize();
+    MatX3d V = l.V * q.toRotationMatrix().transpose();
+    TetMesh tm = tet_mesh_of(V, l.F);
+    const auto e = deform_and_extract(tm);
+    expect_exact_polycube(e, tm);
+    EXPECT_EQ(e.charts.charts, 8) << "rotation " << k;
+    EXPECT_EQ(e.charts.corners, 12) << "rotation " << k;
+    EXPECT_TRUE(e.charts.valid) << "rotation " << k;
+  }
+}
+
+TEST(Realize, BoxWithThroughHoleIsAValidGenusOnePolycube) {
+  MeshData m = examples::make("box_hole", 0.06);
+  TetMesh tm = tet_mesh_of(m.V, m.F);
+  const auto e = deform_and_extract(tm);
+  expect_exact_polycube(e, tm);
+  EXPECT_TRUE(e.charts.valid);
+  for (const auto& p : e.charts.problems) ADD_FAILURE() << p;
+  // Genus 1 from the chart graph: corners - chart edges + charts - (extra boundary loops) = 2 - 2g.
+  // With the hole's faces the charts around it: 16 corners (8 outer, 8 around the hole).
+  EXPECT_EQ(e.charts.corners, 16);
+  EXPECT_GE(e.charts.non_disk_charts, 0);
+}
