@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
                  "Surface edge length of the built-in examples, fraction of the bbox diagonal")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 0.5));
-  app.add_option("--until", until, "Stop after this stage: load, tet, deform (later: polycube, hex, quad)")
+  app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube (later: hex, quad)")
       ->capture_default_str();
   app.add_option("--edge-length", opt.tet.edge_length,
                  "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
@@ -95,6 +95,16 @@ int main(int argc, char** argv) {
   app.add_option("--target-quality", d.target_quality,
                  "Polycube deformation: stop when l1_quality = sum|N|_1/sum|N|_2 - 1 is below this")
       ->capture_default_str()->check(CLI::PositiveNumber);
+  auto& rz = opt.polycube.realize;
+  app.add_option("--realize-start", rz.start,
+                 "Polycube realization start: continuation (the deformed mesh moved onto the planes in steps that "
+                 "keep tets positive), eq17 (the paper's relaxation, then untangling), or auto (both, the lower "
+                 "ARAP distortion wins)")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17"}));
+  app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
+      ->capture_default_str()->check(CLI::Range(0, 100000));
+  bool no_cleanup = false;
+  app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
   bool no_rotation = false;
   app.add_flag("--no-rotation", no_rotation, "Polycube deformation: keep the input orientation (no global rotation, Eq. 3)");
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
@@ -108,6 +118,7 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  if (no_cleanup) opt.polycube.cleanup = {false, false, false};
   auto logger = spdlog::stderr_color_mt("polycube");
   logger->set_pattern("%^[%l]%$ %v");
   logger->set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);

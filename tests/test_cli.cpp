@@ -32,7 +32,7 @@ TEST(Cli, ExampleList) {
 
 class CliExample : public ::testing::TestWithParam<std::string> {};
 
-TEST_P(CliExample, RunsToTetMesh) {
+TEST_P(CliExample, RunsToAnExactPolycube) {
   std::string out = temp_dir("ex_" + GetParam());
   RunResult r = run_cli("--example " + GetParam() + " -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
@@ -52,6 +52,12 @@ TEST_P(CliExample, RunsToTetMesh) {
     EXPECT_EQ(m.T.rows(), j["tetmesh"]["tets"].get<int>());
     EXPECT_EQ(measure_tets(m.V, m.T).inverted, 0);
   }
+  // The main job ends with an exact polycube.
+  EXPECT_EQ(j["stopped_after"], "polycube");
+  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_EQ(j["polycube"]["planarity_error"], 0.0);
+  EXPECT_EQ(j["polycube"]["misoriented_faces"], 0);
+  EXPECT_TRUE(j["polycube"]["chart_graph"]["valid"].get<bool>()) << j["polycube"]["chart_graph"].dump();
 }
 
 INSTANTIATE_TEST_SUITE_P(Examples, CliExample,
@@ -169,4 +175,93 @@ TEST(Cli, UntilDeformWritesDeformedMeshAndConvergenceRecord) {
   MeshData t = io::read_mesh(out + "/tetmesh.mesh");
   // Same connectivity as the tet mesh: the pair is the volumetric map.
   EXPECT_EQ(m.T, t.T);
+}
+
+namespace {
+// Boundary faces of a polycube tet mesh read back: each has one coordinate along its label's axis.
+double planarity_spread(const MeshData& m, const std::vector<int>& labels) {
+  double e = 0;
+  for (int f = 0; f < m.F.rows(); ++f)
+    for (int j = 1; j < 3; ++j)
+      e = std::max(e, std::abs(m.V(m.F(f, j), labels[f] / 2) - m.V(m.F(f, 0), labels[f] / 2)));
+  return e;
+}
+
+std::vector<int> read_labels(const std::string& path) {
+  std::vector<int> l;
+  std::istringstream in(read_text(path));
+  for (int x; in >> x;) l.push_back(x);
+  return l;
+}
+}  // namespace
+
+TEST(Cli, UntilPolycubeWritesLabelsMapAndExactPolycube) {
+  std::string out = temp_dir("polycube");
+  RunResult r = run_cli("--example l_bracket --example-size 0.08 --until polycube -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  const json& p = j["polycube"];
+  EXPECT_EQ(p["charts"], 8);
+  EXPECT_EQ(p["corners"], 12);
+  EXPECT_EQ(p["chart_edges"], 18);
+  EXPECT_EQ(p["corner_valence"]["3"], 12);
+  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>());
+  EXPECT_EQ(p["inverted_tets"], 0);
+  EXPECT_EQ(p["planarity_error"], 0.0);
+  for (const char* k : {"zigzags", "degree1", "degree2", "degree3", "degenerate"}) EXPECT_TRUE(p["cleanup"].contains(k)) << k;
+  for (const char* k : {"min", "mean", "max"}) EXPECT_GE(p["isometric_distortion"][k].get<double>(), 1.0 - 1e-9) << k;
+  EXPECT_LT(p["arap_distortion"].get<double>(), 0.05);
+  EXPECT_EQ(p["map_transfer"], "identity");
+  // labels.txt: one code 0..5 per input triangle; the same as in polycube.vtk's field.
+  MeshData surf = io::read_mesh(out + "/surface.mesh");
+  const std::vector<int> labels = read_labels(out + "/labels.txt");
+  ASSERT_EQ(static_cast<int>(labels.size()), surf.F.rows());
+  std::vector<int> count(6, 0);
+  for (int l : labels) {
+    ASSERT_GE(l, 0);
+    ASSERT_LE(l, 5);
+    count[l]++;
+  }
+  for (int l = 0; l < 6; ++l) EXPECT_GT(count[l], 0) << "label " << l;
+  EXPECT_NE(read_text(out + "/polycube.vtk").find("SCALARS label int"), std::string::npos);
+  // polycube.mesh: exact planes, no inverted tet, same tets as tetmesh.mesh (the volumetric map).
+  MeshData pm = io::read_mesh(out + "/polycube.mesh");
+  MeshData tm = io::read_mesh(out + "/tetmesh.mesh");
+  EXPECT_EQ(pm.T, tm.T);
+  EXPECT_EQ(pm.F, tm.F);
+  EXPECT_EQ(measure_tets(pm.V, pm.T).inverted, 0);
+  EXPECT_EQ(planarity_spread(pm, labels), 0.0);
+  // map.obj: the input surface (same triangles) at its polycube positions, on the polycube's planes.
+  MeshData map = io::read_mesh(out + "/map.obj");
+  EXPECT_EQ(map.F, surf.F);
+  ASSERT_EQ(map.V.rows(), surf.V.rows());
+  EXPECT_EQ(planarity_spread(map, labels), 0.0);
+  MeshData ps = io::read_mesh(out + "/polycube_surface.obj");
+  EXPECT_EQ(ps.F.rows(), surf.F.rows());
+  // At the input's scale: same bounding-box size to within the deformation.
+  const double d0 = (surf.V.colwise().maxCoeff() - surf.V.colwise().minCoeff()).norm();
+  const double d1 = (map.V.colwise().maxCoeff() - map.V.colwise().minCoeff()).norm();
+  EXPECT_NEAR(d1 / d0, 1.0, 0.05);
+}
+
+TEST(Cli, RemeshedSurfaceGetsItsMapByClosestPoints) {
+  std::string out = temp_dir("remesh_map");
+  RunResult r = run_cli("--example sphere --edge-length 0.05 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["polycube"]["map_transfer"], "closest_point");
+  EXPECT_LT(j["polycube"]["map_transfer_max_distance"].get<double>(), 0.05 * j["input"]["bbox"]["diagonal"].get<double>());
+  MeshData surf = io::read_mesh(out + "/surface.mesh");
+  MeshData map = io::read_mesh(out + "/map.obj");
+  EXPECT_EQ(map.V.rows(), surf.V.rows());
+  EXPECT_EQ(map.F, surf.F);
+  EXPECT_EQ(static_cast<int>(read_labels(out + "/labels.txt").size()), surf.F.rows());
+  // Every input vertex lands on the polycube's surface: inside its bounding box.
+  MeshData pm = io::read_mesh(out + "/polycube.mesh");
+  const Vec3 lo = pm.V.colwise().minCoeff(), hi = pm.V.colwise().maxCoeff();
+  for (int v = 0; v < map.V.rows(); ++v)
+    for (int k = 0; k < 3; ++k) {
+      EXPECT_GE(map.V(v, k), lo[k] - 1e-9);
+      EXPECT_LE(map.V(v, k), hi[k] + 1e-9);
+    }
 }

@@ -91,21 +91,27 @@ TEST_P(RealData, LoadsAndTetrahedralizes) {
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealData, ::testing::ValuesIn(shared_meshes()), test_name);
 
-// The polycube deformation on small shared meshes: l1_quality below 1e-3, no inverted tet.
-class RealDeform : public ::testing::TestWithParam<std::string> {};
+// The polycube deformation and extraction on small shared meshes: l1_quality below 1e-3, an exact
+// polycube with a valid chart graph and no inverted tet.
+class RealPolycube : public ::testing::TestWithParam<std::string> {};
 
-TEST_P(RealDeform, ReachesAPolycube) {
+TEST_P(RealPolycube, ReachesAnExactPolycube) {
   const std::string path = shared_dir() + "/meshes/" + GetParam();
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
   PipelineOptions opt;
   opt.input = path;
-  opt.out_dir = temp_dir("real_deform");
-  opt.until = Stage::Deform;
+  opt.out_dir = temp_dir("real_polycube");
+  opt.until = Stage::Polycube;
   nlohmann::json j = run_pipeline(opt);
-  EXPECT_LT(j["polycube"]["l1_quality"].get<double>(), 1e-3);
-  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
-  EXPECT_LT(j["polycube"]["arap_distortion"].get<double>(), 0.15);
+  const auto& p = j["polycube"];
+  EXPECT_LT(p["l1_quality"].get<double>(), 1e-3);
+  EXPECT_LT(p["deformed_arap_distortion"].get<double>(), 0.15);
+  EXPECT_LT(p["arap_distortion"].get<double>(), 0.15);
+  EXPECT_EQ(p["inverted_tets"], 0);
+  EXPECT_EQ(p["planarity_error"], 0.0);
+  EXPECT_EQ(p["misoriented_faces"], 0);
+  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
 }
 
-INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealDeform,
+INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
                          ::testing::Values("tet/mambo_B0.mesh", "basic/eight.off", "basic/torus.obj"), test_name);

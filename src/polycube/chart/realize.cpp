@@ -48,74 +48,116 @@ struct Planes {
   std::vector<double> height[3];
 };
 
-// The problem in reduced variables: per axis, variable of every vertex, and the ARAP Hessian.
+// Two parametrizations of the unknowns, per axis k:
+//   reduced: every vertex maps to a variable; the vertices of one plane share the plane's
+//            variable (its height), the others have their own (planes free, exactly planar);
+//   pinned:  only vertices on no plane of axis k are unknowns; the others are prescribed.
 struct Reduced {
-  std::vector<int> var[3];
+  std::vector<int> var[3];   // reduced variable of every vertex
   int nvar[3] = {0, 0, 0};
+  std::vector<int> fvar[3];  // pinned: unknown of every vertex, -1 if prescribed
   int nfree[3] = {0, 0, 0};
 };
 
+enum class Mode { Reduced, Pinned };
+
 class Realizer {
  public:
-  Realizer(MatX3d rest, MatX4i T, const Planes& planes, const RealizeOptions& opt,
-           const Hooks& hooks)
+  Realizer(MatX3d rest, MatX4i T, const Planes& planes, const RealizeOptions& opt, const Hooks& hooks)
       : rest_(std::move(rest)), T_(std::move(T)), planes_(planes), opt_(opt), hooks_(hooks) {
     arap_rest_ = deform::ArapRest::build(rest_, T_);
     const int n = static_cast<int>(rest_.rows());
     for (int k = 0; k < 3; ++k) {
       auto& var = red_.var[k];
+      auto& fvar = red_.fvar[k];
       var.assign(n, -1);
+      fvar.assign(n, -1);
       int nf = 0;
       for (int v = 0; v < n; ++v)
-        if (planes_.of_vertex[k][v] < 0) var[v] = nf++;
+        if (planes_.of_vertex[k][v] < 0) var[v] = fvar[v] = nf++;
       for (int v = 0; v < n; ++v)
         if (planes_.of_vertex[k][v] >= 0) var[v] = nf + planes_.of_vertex[k][v];
       red_.nfree[k] = nf;
       red_.nvar[k] = nf + planes_.count[k];
     }
-    // Constant ARAP Hessian per axis: sum_t w_t B B^T, in reduced variables.
+    // The constant ARAP Hessian, the same for the three coordinates: sum_t w_t B B^T.
+    std::vector<Eigen::Triplet<double>> trip;
+    trip.reserve(16 * T_.rows());
+    double diag = 0;
+    for (int t = 0; t < T_.rows(); ++t) {
+      const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
+      Eigen::Matrix<double, 4, 3> Bm;
+      Bm.bottomRows<3>() = Di;
+      Bm.row(0) = -Di.colwise().sum();
+      const Eigen::Matrix4d Ke = arap_rest_.w[t] * Bm * Bm.transpose();
+      for (int p = 0; p < 4; ++p)
+        for (int q = 0; q < 4; ++q) trip.emplace_back(T_(t, p), T_(t, q), Ke(p, q));
+      diag += Ke.trace();
+    }
+    K_.resize(n, n);
+    K_.setFromTriplets(trip.begin(), trip.end());
+    // Translations along k are free in reduced mode: a tiny diagonal makes the system definite.
+    const double reg = 1e-10 * diag / std::max(1, n);
     for (int k = 0; k < 3; ++k) {
-      std::vector<Eigen::Triplet<double>> trip;
-      trip.reserve(16 * T_.rows() + red_.nvar[k]);
-      double diag = 0;
-      for (int t = 0; t < T_.rows(); ++t) {
-        const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
-        Eigen::Matrix<double, 4, 3> Bm;
-        Bm.bottomRows<3>() = Di;
-        Bm.row(0) = -Di.colwise().sum();
-        const Eigen::Matrix4d Ke = arap_rest_.w[t] * Bm * Bm.transpose();
-        for (int p = 0; p < 4; ++p)
-          for (int q = 0; q < 4; ++q) {
-            const int a = red_.var[k][T_(t, p)], b = red_.var[k][T_(t, q)];
-            if (a >= b) trip.emplace_back(a, b, Ke(p, q));
+      for (Mode m : {Mode::Reduced, Mode::Pinned}) {
+        const auto& map = m == Mode::Reduced ? red_.var[k] : red_.fvar[k];
+        const int nv = m == Mode::Reduced ? red_.nvar[k] : red_.nfree[k];
+        std::vector<Eigen::Triplet<double>> tk;
+        tk.reserve(K_.nonZeros() / 2 + nv);
+        for (int j = 0; j < n; ++j)
+          for (SpMat::InnerIterator it(K_, j); it; ++it) {
+            const int a = map[it.row()], b = map[j];
+            if (a >= 0 && b >= 0 && a >= b) tk.emplace_back(a, b, it.value());
           }
-        diag += Ke.trace();
+        for (int i = 0; i < nv; ++i) tk.emplace_back(i, i, reg);
+        SpMat Kk(nv, nv);
+        Kk.setFromTriplets(tk.begin(), tk.end());
+        auto& solver = m == Mode::Reduced ? solver_[k] : pinned_solver_[k];
+        solver = make_solver();
+        if (nv > 0) solver->compute(Kk);
+        ok_ = ok_ && (nv == 0 || solver->info() == Eigen::Success);
       }
-      // Translations along k are free: a tiny diagonal makes the system definite.
-      const double reg = 1e-10 * diag / std::max(1, red_.nvar[k]);
-      for (int i = 0; i < red_.nvar[k]; ++i) trip.emplace_back(i, i, reg);
-      SpMat K(red_.nvar[k], red_.nvar[k]);
-      K.setFromTriplets(trip.begin(), trip.end());
-      solver_[k] = make_solver();
-      solver_[k]->compute(K);
-      ok_ = ok_ && solver_[k]->info() == Eigen::Success;
     }
   }
 
   bool ok() const { return ok_; }
-  const MatX3d& rest() const { return rest_; }
-  const MatX4i& T() const { return T_; }
   const deform::ArapRest& arap_rest() const { return arap_rest_; }
 
-  // The step -K^-1 g in reduced variables, expanded to every vertex.
-  MatX3d newton_step(const Eigen::VectorXd& g) const {
+  // The step -K^-1 g in the unknowns of `mode`, expanded to every vertex (0 where prescribed).
+  MatX3d newton_step(const Eigen::VectorXd& g, Mode mode) const {
     const int n = static_cast<int>(rest_.rows());
-    MatX3d d(n, 3);
+    MatX3d d = MatX3d::Zero(n, 3);
     for (int k = 0; k < 3; ++k) {
-      Eigen::VectorXd gk = Eigen::VectorXd::Zero(red_.nvar[k]);
-      for (int v = 0; v < n; ++v) gk[red_.var[k][v]] += g[3 * v + k];
-      const Eigen::VectorXd dk = solver_[k]->solve(-gk);
-      for (int v = 0; v < n; ++v) d(v, k) = dk[red_.var[k][v]];
+      const auto& map = mode == Mode::Reduced ? red_.var[k] : red_.fvar[k];
+      const int nv = mode == Mode::Reduced ? red_.nvar[k] : red_.nfree[k];
+      if (nv == 0) continue;
+      Eigen::VectorXd gk = Eigen::VectorXd::Zero(nv);
+      for (int v = 0; v < n; ++v)
+        if (map[v] >= 0) gk[map[v]] += g[3 * v + k];
+      const Eigen::VectorXd dk = (mode == Mode::Reduced ? solver_[k] : pinned_solver_[k])->solve(-gk);
+      for (int v = 0; v < n; ++v)
+        if (map[v] >= 0) d(v, k) = dk[map[v]];
+    }
+    return d;
+  }
+
+  // Moves the prescribed coordinates by dc and the unknowns by the linear response of the ARAP
+  // quadratic with rotations frozen: K_ff dx_f = -K_fc dc.
+  MatX3d extend(const MatX3d& dc) const {
+    const int n = static_cast<int>(rest_.rows());
+    MatX3d d = dc;
+    for (int k = 0; k < 3; ++k) {
+      const auto& f = red_.fvar[k];
+      if (red_.nfree[k] == 0) continue;
+      Eigen::VectorXd r = Eigen::VectorXd::Zero(red_.nfree[k]);
+      for (int j = 0; j < n; ++j) {
+        if (f[j] >= 0 || dc(j, k) == 0) continue;
+        for (SpMat::InnerIterator it(K_, j); it; ++it)
+          if (f[it.row()] >= 0) r[f[it.row()]] -= it.value() * dc(j, k);
+      }
+      const Eigen::VectorXd x = pinned_solver_[k]->solve(r);
+      for (int v = 0; v < n; ++v)
+        if (f[v] >= 0) d(v, k) = x[f[v]];
     }
     return d;
   }
@@ -149,30 +191,34 @@ class Realizer {
     return E;
   }
 
-  // Local/global ARAP steps while tets are inverted. Returns the steps taken; X updated.
+  // The barrier acts below barrier_threshold x the median volume ratio of X.
+  void set_barrier_scale(const MatX3d& X) {
+    std::vector<double> J(T_.rows());
+    for (int t = 0; t < T_.rows(); ++t) J[t] = volume_ratio(X, T_, arap_rest_, t);
+    std::nth_element(J.begin(), J.begin() + J.size() / 2, J.end());
+    tau_ = opt_.barrier_threshold * std::max(J[J.size() / 2], 1e-300);
+  }
+
+  // Local/global ARAP steps (reduced mode) while tets are inverted. Returns the steps taken.
   int untangle(MatX3d& X, int& inverted) const {
     inverted = count_inverted(X, T_, arap_rest_);
     int it = 0;
     Eigen::VectorXd g;
     for (; inverted > 0 && it < opt_.untangle_iterations; ++it) {
       energy(X, &g, false);
-      X += newton_step(g);
+      X += newton_step(g, Mode::Reduced);
       inverted = count_inverted(X, T_, arap_rest_);
     }
     return it;
   }
 
-  // ARAP minimization from a tangle-free X. Returns iterations.
-  int minimize(MatX3d& X) {
-    std::vector<double> J(T_.rows());
-    for (int t = 0; t < T_.rows(); ++t) J[t] = volume_ratio(X, T_, arap_rest_, t);
-    std::nth_element(J.begin(), J.begin() + J.size() / 2, J.end());
-    tau_ = opt_.barrier_threshold * J[J.size() / 2];
+  // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
+  int minimize(MatX3d& X, Mode mode, int max_iterations) const {
     Eigen::VectorXd g, gt;
     double E = energy(X, &g, true);
     int it = 0;
-    for (; it < opt_.max_iterations && std::isfinite(E); ++it) {
-      const MatX3d d = newton_step(g);
+    for (; it < max_iterations && std::isfinite(E); ++it) {
+      const MatX3d d = newton_step(g, mode);
       const double slope = Eigen::Map<const Eigen::VectorXd>(d.data(), d.size()).dot(g);
       if (!(slope < 0)) break;
       double s = 1, Et = E;
@@ -195,9 +241,41 @@ class Realizer {
         ++it;
         break;
       }
-      hooks_.report("polycube", 0.3 + 0.6 * it / opt_.max_iterations);
     }
     return it;
+  }
+
+  // Continuation from a tangle-free X whose plane vertices are off their planes: the prescribed
+  // coordinates travel to the plane heights in steps small enough to keep every tet positive,
+  // the others following (extend) and relaxing (pinned Newton). Returns false if a step collapses.
+  bool continuation(MatX3d& X, int& steps) const {
+    const int n = static_cast<int>(rest_.rows());
+    MatX3d gap = MatX3d::Zero(n, 3);  // plane height - start, on prescribed coordinates
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v)
+        if (planes_.of_vertex[k][v] >= 0) gap(v, k) = planes_.height[k][planes_.of_vertex[k][v]] - X(v, k);
+    double t = 0, dt = 1.0;
+    steps = 0;
+    while (t < 1) {
+      const double t1 = std::min(1.0, t + dt);
+      MatX3d Xt = X + extend((t1 - t) * gap);
+      if (t1 == 1.0)  // land exactly on the planes
+        for (int k = 0; k < 3; ++k)
+          for (int v = 0; v < n; ++v)
+            if (planes_.of_vertex[k][v] >= 0) Xt(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
+      ++steps;
+      if (!std::isfinite(energy(Xt, nullptr, true))) {
+        dt *= 0.5;
+        if (dt < 1e-6) return false;
+        continue;
+      }
+      X = std::move(Xt);
+      t = t1;
+      minimize(X, Mode::Pinned, 5);
+      dt = std::min(1.0, 2 * dt);
+      hooks_.report("polycube", 0.1 + 0.5 * t);
+    }
+    return true;
   }
 
  private:
@@ -208,7 +286,8 @@ class Realizer {
   const Hooks& hooks_;
   deform::ArapRest arap_rest_;
   Reduced red_;
-  std::unique_ptr<Cholmod> solver_[3];
+  SpMat K_;
+  std::unique_ptr<Cholmod> solver_[3], pinned_solver_[3];
   bool ok_ = true;
   double tau_ = 0;
 };
@@ -425,36 +504,46 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
 
   // ---- starts ----
   std::vector<std::string> starts;
+  if (opt.start == "continuation" || opt.start == "auto") starts.push_back("continuation");
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
-  if (opt.start == "projected" || opt.start == "auto") starts.push_back("projected");
-  if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (eq17, projected, auto)");
+  if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto)");
   bool have = false;
   std::string last_failure;
   for (const auto& name : starts) {
     MatX3d X = def;
+    int ut = 0;
     if (name == "eq17") {
       if (!relax_eq17(B, T, planes, X)) {
         last_failure = "the relaxation of Eq. 17 failed";
         continue;
       }
+      int inverted = 0;
+      ut = solver.untangle(X, inverted);
+      if (inverted > 0) {
+        hooks.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
+                    std::to_string(ut) + " untangling steps");
+        last_failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
+                       " untangling steps from the relaxation of Eq. 17";
+        continue;
+      }
+      solver.set_barrier_scale(X);
     } else {
-      for (int k = 0; k < 3; ++k)
-        for (int v = 0; v < n; ++v)
-          if (planes.of_vertex[k][v] >= 0) X(v, k) = planes.height[k][planes.of_vertex[k][v]];
+      const int inv = count_inverted(X, T, solver.arap_rest());
+      if (inv > 0) {
+        last_failure = "the deformed mesh has " + std::to_string(inv) + " inverted tets";
+        continue;
+      }
+      solver.set_barrier_scale(X);
+      if (!solver.continuation(X, ut)) {
+        hooks.debug("realization by continuation: a step would invert tets at any length");
+        last_failure = "the continuation towards the planes cannot proceed without inverting tets";
+        continue;
+      }
     }
-    int inverted = 0;
-    const int ut = solver.untangle(X, inverted);
-    if (inverted > 0) {
-      hooks.debug("realization from the " + name + " start: " + std::to_string(inverted) +
-                  " tets still inverted after " + std::to_string(ut) + " untangling steps");
-      last_failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
-                     " untangling steps (start: " + name + ")";
-      continue;
-    }
-    const int it = solver.minimize(X);
+    const int it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
     const double arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
     hooks.debug("realization from the " + name + " start: ARAP " + std::to_string(arap) + " after " +
-                std::to_string(ut) + " untangling and " + std::to_string(it) + " ARAP iterations");
+                std::to_string(ut) + " untangling/continuation and " + std::to_string(it) + " ARAP iterations");
     if (!have || arap < r.arap) {
       have = true;
       r.X = std::move(X);

@@ -9,6 +9,7 @@ const char* to_string(ErrorKind kind) {
     case ErrorKind::InvalidMesh: return "invalid_mesh";
     case ErrorKind::Tetrahedralization: return "tetrahedralization";
     case ErrorKind::Output: return "output";
+    case ErrorKind::Polycube: return "polycube";
     case ErrorKind::Internal: return "internal";
   }
   return "internal";
@@ -21,6 +22,7 @@ int exit_code(ErrorKind kind) {
     case ErrorKind::InvalidMesh: return 4;
     case ErrorKind::Tetrahedralization: return 5;
     case ErrorKind::Output: return 6;
+    case ErrorKind::Polycube: return 7;
     case ErrorKind::Internal: return 70;
   }
   return 70;

@@ -13,6 +13,7 @@ enum class ErrorKind {
   InvalidMesh,        ///< readable but unusable: non-manifold, open, degenerate, self-intersecting...
   Tetrahedralization, ///< the tet mesher failed or produced an invalid mesh
   Output,             ///< an output file could not be written
+  Polycube,           ///< no valid polycube could be built from the deformation
   Internal,           ///< a broken invariant: a bug
 };
 

@@ -1,6 +1,7 @@
 #include "polycube/pipeline/pipeline.h"
 
 #include <algorithm>
+#include <numeric>
 #include <array>
 #include <filesystem>
 #include <map>
@@ -8,6 +9,7 @@
 
 #include "polycube/core/error.h"
 #include "polycube/examples/examples.h"
+#include "polycube/geometry/closest_point.h"
 #include "polycube/io/writers.h"
 #include "polycube/validate/tetmesh.h"
 
@@ -28,13 +30,13 @@ const char* to_string(Stage s) {
   return "?";
 }
 
-Stage last_available_stage() { return Stage::Deform; }
+Stage last_available_stage() { return Stage::Polycube; }
 
 Stage parse_stage(const std::string& name) {
   for (Stage s : {Stage::Load, Stage::Tet, Stage::Deform, Stage::Polycube, Stage::Hex, Stage::Quad})
     if (name == to_string(s)) {
       if (static_cast<int>(s) > static_cast<int>(last_available_stage()))
-        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform)");
+        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform, polycube)");
       return s;
     }
   throw Error(ErrorKind::Usage, "unknown stage '" + name + "' (stages: load, tet, deform, polycube, hex, quad)");
@@ -42,7 +44,8 @@ Stage parse_stage(const std::string& name) {
 
 const std::vector<std::string>& output_files() {
   static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk",
-                                             "deformed.mesh", "deformed.vtk"};
+                                             "deformed.mesh", "deformed.vtk", "labels.txt", "polycube.mesh",
+                                             "polycube.vtk", "polycube_surface.obj", "map.obj"};
   return f;
 }
 
@@ -137,7 +140,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
   }
   std::vector<std::string> written;
   auto stage_path = [&](const std::string& name) {
-    written.push_back(name);
+    if (std::find(written.begin(), written.end(), name) == written.end()) written.push_back(name);
     return (staging / name).string();
   };
   auto write_mesh = [&](const std::string& stem, const MeshData& m) {
@@ -167,6 +170,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     SurfaceLayout layout;
     TetMesh tm;
     bool have_tets = false;
+    // Tet vertex of every surface vertex while the tet boundary is the input surface (empty once
+    // the surface is remeshed): the polycube map then needs no transfer.
+    std::vector<int> surf_to_tet;
     if (in.T.rows() > 0) {
       // Tet mesh input: checked, its boundary validated like a surface input.
       report["input"]["kind"] = "tet";
@@ -197,6 +203,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (tr.tets_reoriented) report["input"]["repaired"] = true;
       surface.V = bm.V;
       surface.F = bm.F;
+      surf_to_tet = back;
       have_tets = true;
     } else {
       MeshData s = in.H.rows() > 0 ? hex_boundary_surface(in) : in;
@@ -248,6 +255,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj = tet_json(tm, stats.quality);
         tj["source"] = "gmsh-" + stats.algorithm;
         tj["remeshed"] = el > 0;
+        if (el <= 0) {
+          surf_to_tet.resize(surface.V.rows());
+          std::iota(surf_to_tet.begin(), surf_to_tet.end(), 0);  // tetrahedralize keeps them first
+        }
         tj["surface_vertices"] = stats.surface_vertices;
         tj["gmsh_runs"] = stats.attempts;
       }
@@ -276,11 +287,27 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     }
 
     // ---- deform -------------------------------------------------------------------------
+    deform::DeformResult dr;
+    auto deformed_mesh = [&] {
+      MeshData dm;
+      dm.V = dr.X;
+      dm.F = tm.boundary;
+      dm.T = tm.T;
+      return dm;
+    };
+    // deformed.vtk: boundary faces carry their unit normal (and, once known, their label).
+    auto write_deformed_vtk = [&](const io::CellFields& fields) {
+      const MeshData dm = deformed_mesh();
+      MatX3d normals = MatX3d::Zero(dm.F.rows() + dm.T.rows(), 3);
+      for (int f = 0; f < dm.F.rows(); ++f)
+        normals.row(f) = deform::area_normal(dm.V, dm.F(f, 0), dm.F(f, 1), dm.F(f, 2)).normalized().transpose();
+      io::write_vtk(stage_path("deformed.vtk"), dm, opt.vtk_binary, fields, {{"normal", normals}});
+    };
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform)) {
       Stopwatch sd;
       hooks.report("deform", 0);
       hooks.info("deforming towards a polycube (" + std::to_string(tm.T.rows()) + " tets)");
-      deform::DeformResult dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, opt.deform, hooks);
+      dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, opt.deform, hooks);
       json pj = {{"l1_quality", dr.l1_quality},
                  {"error_d", dr.error_d},
                  {"arap_distortion", dr.arap},
@@ -307,15 +334,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       report["polycube"] = pj;
       if (dr.inverted > 0)
         throw Error(ErrorKind::Internal, "the deformation produced " + std::to_string(dr.inverted) + " inverted tets");
-      MeshData dm;
-      dm.V = dr.X;
-      dm.F = tm.boundary;
-      dm.T = tm.T;
-      MatX3d normals = MatX3d::Zero(dm.F.rows() + dm.T.rows(), 3);
-      for (int f = 0; f < dm.F.rows(); ++f)
-        normals.row(f) = deform::area_normal(dm.V, dm.F(f, 0), dm.F(f, 1), dm.F(f, 2)).normalized().transpose();
-      io::write_medit(stage_path("deformed.mesh"), dm);
-      io::write_vtk(stage_path("deformed.vtk"), dm, opt.vtk_binary, {}, {{"normal", normals}});
+      io::write_medit(stage_path("deformed.mesh"), deformed_mesh());
+      write_deformed_vtk({});
       report["timings"]["deform"] = sd.seconds();
       hooks.info("polycube deformation: l1_quality " + std::to_string(dr.l1_quality) + ", ARAP " +
                  std::to_string(dr.arap) + ", " + std::to_string(dr.iterations) + " iterations, " +
@@ -324,6 +344,146 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.warn("l1_quality " + std::to_string(dr.l1_quality) + " is above the target " +
                    std::to_string(opt.deform.target_quality));
       hooks.report("deform", 1);
+    }
+
+    // ---- polycube -----------------------------------------------------------------------
+    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Polycube)) {
+      Stopwatch sp;
+      hooks.report("polycube", 0);
+      hooks.info("extracting the polycube");
+      const chart::PolycubeExtraction ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+      const chart::RealizeResult& rr = ex.realized;
+      json& pj = report["polycube"];
+      pj["deformed_arap_distortion"] = dr.arap;
+      {
+        const chart::Distortion di = chart::isometric_distortion(tm.V, dr.X, tm.T);
+        pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
+      }
+      pj["charts"] = ex.charts.charts;
+      pj["corners"] = ex.charts.corners;
+      pj["chart_edges"] = ex.charts.chart_edges;
+      json valence = json::object();
+      for (size_t k = 3; k < ex.charts.corner_valence.size(); ++k)
+        if (ex.charts.corner_valence[k]) valence[std::to_string(k)] = ex.charts.corner_valence[k];
+      pj["corner_valence"] = valence;
+      pj["initial_charts"] = ex.initial_charts;
+      pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
+                       {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
+                       {"degree3", ex.cleanup.degree3},       {"relabelled_faces", ex.cleanup.relabelled_faces}};
+      pj["chart_graph"] = {{"valid", ex.charts.valid},
+                           {"opposite_adjacent", ex.charts.opposite_adjacent},
+                           {"high_valence_corners", ex.charts.high_valence_corners},
+                           {"non_disk_charts", ex.charts.non_disk_charts},
+                           {"invalid_topology_charts", ex.charts.invalid_topology_charts},
+                           {"loops_with_few_corners", ex.charts.loops_with_few_corners},
+                           {"problems", ex.charts.problems}};
+      pj["realization"] = {{"success", rr.success},
+                           {"start", rr.start},
+                           {"split_edges", rr.split_edges},
+                           {"untangle_iterations", rr.untangle_iterations},
+                           {"arap_iterations", rr.iterations},
+                           {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
+                           {"seconds", rr.seconds}};
+      if (!rr.success) pj["realization"]["failure"] = rr.failure;
+      if (!rr.success) throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
+      pj["arap_distortion"] = rr.arap;
+      pj["inverted_tets"] = rr.inverted;
+      pj["planarity_error"] = rr.planarity_error;
+      pj["misoriented_faces"] = rr.misoriented_faces;
+      pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
+      if (!ex.charts.valid)
+        hooks.warn("the polycube is exact and has no inverted tet, but its chart graph has problems: " +
+                   (ex.charts.problems.empty() ? std::string("see report.json") : ex.charts.problems.front()));
+
+      // Labels of the input triangles and polycube positions of the input vertices.
+      const MatX3i& B = tm.boundary;
+      bool direct = static_cast<int>(surf_to_tet.size()) == surface.V.rows() && B.rows() == surface.F.rows();
+      for (int f = 0; direct && f < B.rows(); ++f) {
+        std::array<int, 3> a{surf_to_tet[surface.F(f, 0)], surf_to_tet[surface.F(f, 1)], surf_to_tet[surface.F(f, 2)]};
+        std::array<int, 3> b{B(f, 0), B(f, 1), B(f, 2)};
+        std::sort(a.begin(), a.end());
+        std::sort(b.begin(), b.end());
+        direct = a == b;
+      }
+      std::vector<int> labels(surface.F.rows());
+      MatX3d map_V(surface.V.rows(), 3);
+      if (direct) {
+        labels = ex.labels;
+        for (int v = 0; v < surface.V.rows(); ++v) map_V.row(v) = rr.X.row(surf_to_tet[v]);
+        pj["map_transfer"] = "identity";
+      } else {
+        // Remeshed surface: closest point on the tet boundary at rest, barycentric transfer.
+        geometry::TriangleTree tree(tm.V, B);
+        double worst = 0;
+        for (int v = 0; v < surface.V.rows(); ++v) {
+          const geometry::ClosestHit h = tree.closest(surface.V.row(v).transpose());
+          worst = std::max(worst, h.dist2);
+          map_V.row(v).setZero();
+          for (int j = 0; j < 3; ++j) map_V.row(v) += h.bary[j] * rr.X.row(B(h.face, j));
+        }
+        for (int f = 0; f < surface.F.rows(); ++f) {
+          const Vec3 c = (surface.V.row(surface.F(f, 0)) + surface.V.row(surface.F(f, 1)) + surface.V.row(surface.F(f, 2))) / 3;
+          labels[f] = ex.labels[tree.closest(c).face];
+        }
+        pj["map_transfer"] = "closest_point";
+        pj["map_transfer_max_distance"] = std::sqrt(worst);
+      }
+      {
+        std::ofstream lf(stage_path("labels.txt"));
+        for (int l : labels) lf << l << "\n";
+        lf.close();
+        if (!lf) throw Error(ErrorKind::Output, (out / "labels.txt").string() + ": write failed");
+      }
+      MeshData pm;
+      pm.V = rr.X;
+      pm.F = B;
+      pm.T = rr.T;
+      io::CellFields pf;
+      pf["label"] = ex.labels;
+      pf["label"].resize(B.rows() + rr.T.rows(), -1);
+      io::write_medit(stage_path("polycube.mesh"), pm);
+      io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
+      io::CellFields df;
+      df["label"] = ex.labels;
+      df["label"].resize(B.rows() + tm.T.rows(), -1);
+      write_deformed_vtk(df);
+      {
+        // The polycube's boundary alone, compactly numbered.
+        std::vector<int> id(rr.X.rows(), -1);
+        std::vector<int> keep;
+        MatX3i SF = B;
+        for (int f = 0; f < SF.rows(); ++f)
+          for (int j = 0; j < 3; ++j) {
+            int& v = SF(f, j);
+            if (id[v] < 0) {
+              id[v] = static_cast<int>(keep.size());
+              keep.push_back(v);
+            }
+            v = id[v];
+          }
+        MatX3d SV(keep.size(), 3);
+        for (size_t i = 0; i < keep.size(); ++i) SV.row(static_cast<Eigen::Index>(i)) = rr.X.row(keep[i]);
+        io::write_obj(stage_path("polycube_surface.obj"), SV, SF);
+      }
+      io::write_obj(stage_path("map.obj"), map_V, surface.F);
+      // Labels on the input surface and the deformed mesh too.
+      io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
+      if (rr.split_edges > 0) {
+        // The tet mesh gained midpoints: rewrite it so that tetmesh.* and polycube.* stay a map.
+        MeshData tmo;
+        tmo.V = rr.rest;
+        tmo.T = rr.T;
+        tmo.F = B;
+        write_mesh("tetmesh", tmo);
+        report["tetmesh"]["vertices"] = rr.rest.rows();
+        report["tetmesh"]["tets"] = rr.T.rows();
+        report["tetmesh"]["realization_edges_split"] = rr.split_edges;
+      }
+      report["timings"]["polycube"] = sp.seconds();
+      hooks.info("polycube: " + std::to_string(ex.charts.charts) + " charts, " + std::to_string(ex.charts.corners) +
+                 " corners, ARAP " + std::to_string(rr.arap) + ", max isometric distortion " +
+                 std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
+      hooks.report("polycube", 1);
     }
 
     // ---- publish ------------------------------------------------------------------------

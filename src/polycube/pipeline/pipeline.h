@@ -1,5 +1,5 @@
-// The whole job: load and validate an input, tetrahedralize it, (later: deform into a polycube,
-// extract the polycube, hex/quad remeshing), write the outputs and report.json.
+// The whole job: load and validate an input, tetrahedralize it, deform it into a polycube, extract
+// the exact polycube and its map (later: hex/quad remeshing), write the outputs and report.json.
 //
 // Output protocol: files are written to OUTDIR/.staging and moved into OUTDIR only when every
 // stage asked for has succeeded; outputs of an earlier run are removed first. On failure OUTDIR
@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "polycube/chart/extract.h"
 #include "polycube/core/log.h"
 #include "polycube/deform/solver.h"
 #include "polycube/io/readers.h"
@@ -36,6 +37,7 @@ struct PipelineOptions {
   ValidateOptions validate;
   TetOptions tet;
   deform::DeformOptions deform;
+  chart::ExtractOptions polycube;
 };
 
 /// Names of every file the pipeline may write into the output folder.

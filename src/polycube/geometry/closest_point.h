@@ -1,0 +1,40 @@
+// Closest-point queries on triangle meshes: a bounding-box hierarchy over the triangles, used to
+// carry labels and positions between a surface and its remeshed or tetrahedralized version.
+#pragma once
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::geometry {
+
+/// Closest point of triangle (a, b, c) to p, as barycentric coordinates (sum 1, all >= 0).
+Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
+
+struct ClosestHit {
+  int face = -1;       ///< triangle id
+  Vec3 bary;           ///< barycentric coordinates of the closest point in that triangle
+  Vec3 point;          ///< the closest point
+  double dist2 = 0;    ///< squared distance
+};
+
+/// Bounding-box tree over the triangles of (V, F); V and F are copied.
+class TriangleTree {
+ public:
+  TriangleTree(const MatX3d& V, const MatX3i& F);
+  /// Closest point of the mesh to p (exact, branch and bound).
+  ClosestHit closest(const Vec3& p) const;
+
+ private:
+  struct Node {
+    Eigen::AlignedBox3d box;
+    int left = -1, right = -1;  // children, or -1 for a leaf
+    int begin = 0, end = 0;     // leaf: range in order_
+  };
+  int build(int begin, int end);
+  MatX3d V_;
+  MatX3i F_;
+  std::vector<int> order_;
+  std::vector<Node> nodes_;
+};
+
+}  // namespace polycube::geometry
