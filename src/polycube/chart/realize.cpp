@@ -213,12 +213,76 @@ class Realizer {
   }
 
   // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
+  // A Newton step with the barrier's curvature: (K (x) I3 + sum_active b''(J) dJ dJ^T) d = -g over
+  // the unknowns of `mode`, all axes coupled, factorized afresh. Used when the constant-Hessian
+  // step stalls on nearly flat tets, whose barrier it ignores.
+  MatX3d coupled_step(const MatX3d& X, const Eigen::VectorXd& g, Mode mode) const {
+    const int n = static_cast<int>(rest_.rows());
+    int offset[4] = {0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k)
+      offset[k + 1] = offset[k] + (mode == Mode::Reduced ? red_.nvar[k] : red_.nfree[k]);
+    auto dof = [&](int v, int k) {
+      const int m = mode == Mode::Reduced ? red_.var[k][v] : red_.fvar[k][v];
+      return m < 0 ? -1 : offset[k] + m;
+    };
+    std::vector<Eigen::Triplet<double>> trip;
+    trip.reserve(3 * K_.nonZeros() / 2 + offset[3]);
+    double diag = 0;
+    for (int j = 0; j < n; ++j)
+      for (SpMat::InnerIterator it(K_, j); it; ++it)
+        for (int k = 0; k < 3; ++k) {
+          const int a = dof(static_cast<int>(it.row()), k), b = dof(j, k);
+          if (a >= 0 && b >= 0 && a >= b) trip.emplace_back(a, b, it.value());
+          if (a >= 0 && a == b) diag += it.value();
+        }
+    for (int t = 0; t < T_.rows(); ++t) {
+      Eigen::Matrix3d Ds;
+      const int v[4] = {T_(t, 0), T_(t, 1), T_(t, 2), T_(t, 3)};
+      for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(v[m + 1]) - X.row(v[0])).transpose();
+      const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
+      const Eigen::Matrix3d F = Ds * Di;
+      const double J = F.determinant();
+      if (!(J > 0) || J >= tau_) continue;
+      const double w = opt_.barrier_weight * arap_rest_.w[t];
+      const double b2 = 2 * w * (1 - std::log(J / tau_)) / (J * J);
+      const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
+      Eigen::Matrix<double, 4, 3> Bm;
+      Bm.bottomRows<3>() = Di;
+      Bm.row(0) = -Di.colwise().sum();
+      Eigen::Matrix<double, 12, 1> dJ;
+      for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * Bm.row(p).transpose();
+      for (int p = 0; p < 12; ++p)
+        for (int q = 0; q < 12; ++q) {
+          const int a = dof(v[p / 3], p % 3), b = dof(v[q / 3], q % 3);
+          if (a >= 0 && b >= 0 && a >= b) trip.emplace_back(a, b, b2 * dJ[p] * dJ[q]);
+        }
+    }
+    const double reg = 1e-10 * diag / std::max(1, offset[3]);
+    for (int i = 0; i < offset[3]; ++i) trip.emplace_back(i, i, reg);
+    SpMat H(offset[3], offset[3]);
+    H.setFromTriplets(trip.begin(), trip.end());
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(offset[3]);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k)
+        if (dof(v, k) >= 0) rhs[dof(v, k)] -= g[3 * v + k];
+    auto solver = make_solver();
+    solver->compute(H);
+    MatX3d d = MatX3d::Zero(n, 3);
+    if (solver->info() != Eigen::Success) return d;
+    const Eigen::VectorXd x = solver->solve(rhs);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k)
+        if (dof(v, k) >= 0) d(v, k) = x[dof(v, k)];
+    return d;
+  }
+
   int minimize(MatX3d& X, Mode mode, int max_iterations) const {
     Eigen::VectorXd g, gt;
     double E = energy(X, &g, true);
     int it = 0;
+    bool coupled = false;
     for (; it < max_iterations && std::isfinite(E); ++it) {
-      const MatX3d d = newton_step(g, mode);
+      const MatX3d d = coupled ? coupled_step(X, g, mode) : newton_step(g, mode);
       const double slope = Eigen::Map<const Eigen::VectorXd>(d.data(), d.size()).dot(g);
       if (!(slope < 0)) break;
       double s = 1, Et = E;
@@ -232,12 +296,18 @@ class Realizer {
           break;
         }
       }
-      if (!accepted) break;
+      if (!accepted) {
+        if (coupled) break;
+        coupled = true;  // retry this iteration with the barrier's curvature
+        continue;
+      }
       const double decrease = E - Et;
       X = std::move(Xt);
       g = gt;
       E = Et;
-      if (decrease < opt_.tolerance * E) {
+      // Short steps mean nearly flat tets: take the next one with the barrier's curvature.
+      coupled = s < 0.25;
+      if (decrease < opt_.tolerance * E && s >= 0.25) {
         ++it;
         break;
       }
@@ -266,12 +336,34 @@ class Realizer {
       ++steps;
       if (!std::isfinite(energy(Xt, nullptr, true))) {
         dt *= 0.5;
-        if (dt < 1e-6) return false;
+        if (dt < 1e-6) {
+          // Name the tets that block the path, for the failure message.
+          std::string who;
+          int count = 0;
+          for (int t = 0; t < T_.rows(); ++t)
+            if (!(volume_ratio(Xt, T_, arap_rest_, t) > 0) && count++ < 3) {
+              who += (who.empty() ? "" : "; ") + std::string("tet ") + std::to_string(t) + " (";
+              for (int j = 0; j < 4; ++j) {
+                const int v = T_(t, j);
+                who += (j ? " " : "") + std::to_string(v) + ":";
+                for (int k = 0; k < 3; ++k) who += planes_.of_vertex[k][v] >= 0 ? "XYZ"[k] : '-';
+              }
+              who += ")";
+            }
+          blocked_ = std::to_string(count) + " tets would invert at t = " + std::to_string(t) + ", e.g. " + who +
+                     " (vertex:axes of its planes)";
+          // Land on the planes anyway; the caller untangles what inverted.
+          X += extend((1 - t) * gap);
+          for (int k = 0; k < 3; ++k)
+            for (int v = 0; v < n; ++v)
+              if (planes_.of_vertex[k][v] >= 0) X(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
+          return false;
+        }
         continue;
       }
       X = std::move(Xt);
       t = t1;
-      minimize(X, Mode::Pinned, 5);
+      minimize(X, Mode::Pinned, 3);
       dt = std::min(1.0, 2 * dt);
       hooks_.report("polycube", 0.1 + 0.5 * t);
     }
@@ -290,6 +382,10 @@ class Realizer {
   std::unique_ptr<Cholmod> solver_[3], pinned_solver_[3];
   bool ok_ = true;
   double tau_ = 0;
+  mutable std::string blocked_;
+
+ public:
+  const std::string& blocked() const { return blocked_; }
 };
 
 // Eq. 17 with the plane heights fixed: per axis, minimize the weighted sum of squared uniform
@@ -508,8 +604,10 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
   if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto)");
   bool have = false;
-  std::string last_failure;
+  std::string last_failure, failures;
   for (const auto& name : starts) {
+    if (!last_failure.empty()) failures += (failures.empty() ? "" : "; ") + last_failure;
+    last_failure.clear();
     MatX3d X = def;
     int ut = 0;
     if (name == "eq17") {
@@ -535,15 +633,23 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       }
       solver.set_barrier_scale(X);
       if (!solver.continuation(X, ut)) {
-        hooks.debug("realization by continuation: a step would invert tets at any length");
-        last_failure = "the continuation towards the planes cannot proceed without inverting tets";
-        continue;
+        int inverted = 0;
+        const int u2 = solver.untangle(X, inverted);
+        hooks.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
+                    std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
+        ut += u2;
+        if (inverted > 0) {
+          last_failure = "moving the deformed mesh onto the planes: " + solver.blocked() + "; " +
+                         std::to_string(inverted) + " tets remain inverted after landing and untangling";
+          continue;
+        }
       }
     }
     const int it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
     const double arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
     hooks.debug("realization from the " + name + " start: ARAP " + std::to_string(arap) + " after " +
-                std::to_string(ut) + " untangling/continuation and " + std::to_string(it) + " ARAP iterations");
+                std::to_string(ut) + " untangling/continuation steps and " + std::to_string(it) +
+                " ARAP iterations, " + std::to_string(sw.seconds()) + " s");
     if (!have || arap < r.arap) {
       have = true;
       r.X = std::move(X);
@@ -553,7 +659,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       r.iterations = it;
     }
   }
-  if (!have) return fail(last_failure);
+  if (!last_failure.empty()) failures += (failures.empty() ? "" : "; ") + last_failure;
+  if (!have) return fail(failures);
   hooks.report("polycube", 0.95);
 
   // ---- checks ----
