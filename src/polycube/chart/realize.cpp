@@ -177,7 +177,7 @@ class Realizer {
       if (!(J > 0)) return std::numeric_limits<double>::infinity();
       if (J >= tau_) continue;
       const double l = std::log(J / tau_);
-      const double w = opt_.barrier_weight * arap_rest_.w[t];
+      const double w = barrier_weight_ * arap_rest_.w[t];
       E += w * l * l;
       if (g) {
         const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
@@ -243,7 +243,7 @@ class Realizer {
       const Eigen::Matrix3d F = Ds * Di;
       const double J = F.determinant();
       if (!(J > 0) || J >= tau_) continue;
-      const double w = opt_.barrier_weight * arap_rest_.w[t];
+      const double w = barrier_weight_ * arap_rest_.w[t];
       const double b2 = 2 * w * (1 - std::log(J / tau_)) / (J * J);
       const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
       Eigen::Matrix<double, 4, 3> Bm;
@@ -319,6 +319,7 @@ class Realizer {
   // coordinates travel to the plane heights in steps small enough to keep every tet positive,
   // the others following (extend) and relaxing (pinned Newton). Returns false if a step collapses.
   bool continuation(MatX3d& X, int& steps) const {
+    constexpr int max_steps = 60;  // block: 25; a stalling run halves dt to nothing
     const int n = static_cast<int>(rest_.rows());
     MatX3d gap = MatX3d::Zero(n, 3);  // plane height - start, on prescribed coordinates
     for (int k = 0; k < 3; ++k)
@@ -334,9 +335,9 @@ class Realizer {
           for (int v = 0; v < n; ++v)
             if (planes_.of_vertex[k][v] >= 0) Xt(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
       ++steps;
-      if (!std::isfinite(energy(Xt, nullptr, true))) {
+      if (!std::isfinite(energy(Xt, nullptr, true)) || steps > max_steps) {
         dt *= 0.5;
-        if (dt < 1e-6) {
+        if (dt < 1e-4 || steps > max_steps) {
           // Name the tets that block the path, for the failure message.
           std::string who;
           int count = 0;
@@ -352,12 +353,7 @@ class Realizer {
             }
           blocked_ = std::to_string(count) + " tets would invert at t = " + std::to_string(t) + ", e.g. " + who +
                      " (vertex:axes of its planes)";
-          // Land on the planes anyway; the caller untangles what inverted.
-          X += extend((1 - t) * gap);
-          for (int k = 0; k < 3; ++k)
-            for (int v = 0; v < n; ++v)
-              if (planes_.of_vertex[k][v] >= 0) X(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
-          return false;
+          return false;  // X: the last tangle-free state
         }
         continue;
       }
@@ -368,6 +364,19 @@ class Realizer {
       hooks_.report("polycube", 0.1 + 0.5 * t);
     }
     return true;
+  }
+
+  // Puts the plane vertices on their planes at once (the others following by the ARAP response).
+  void land(MatX3d& X) const {
+    const int n = static_cast<int>(rest_.rows());
+    MatX3d gap = MatX3d::Zero(n, 3);
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v)
+        if (planes_.of_vertex[k][v] >= 0) gap(v, k) = planes_.height[k][planes_.of_vertex[k][v]] - X(v, k);
+    X += extend(gap);
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v)
+        if (planes_.of_vertex[k][v] >= 0) X(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
   }
 
  private:
@@ -383,6 +392,11 @@ class Realizer {
   bool ok_ = true;
   double tau_ = 0;
   mutable std::string blocked_;
+  double barrier_weight_ = 0;
+
+ public:
+  void set_barrier_weight(double w) { barrier_weight_ = w; }
+  double barrier_weight() const { return barrier_weight_; }
 
  public:
   const std::string& blocked() const { return blocked_; }
@@ -624,6 +638,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
                        " untangling steps from the relaxation of Eq. 17";
         continue;
       }
+      solver.set_barrier_weight(opt.barrier_weight);
       solver.set_barrier_scale(X);
     } else {
       const int inv = count_inverted(X, T, solver.arap_rest());
@@ -632,7 +647,20 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         continue;
       }
       solver.set_barrier_scale(X);
-      if (!solver.continuation(X, ut)) {
+      // Where the continuation stalls on nearly flat tets, a stronger barrier keeps them open:
+      // retried with the barrier weight x10, x100.
+      bool landed = false;
+      for (double f = 1; f <= 100 && !landed; f *= 10) {
+        X = def;
+        solver.set_barrier_weight(f * opt.barrier_weight);
+        int steps = 0;
+        landed = solver.continuation(X, steps);
+        ut += steps;
+        if (!landed) hooks.debug("continuation stalled with barrier weight " + std::to_string(f * opt.barrier_weight) +
+                                 ": " + solver.blocked());
+      }
+      if (!landed) {
+        solver.land(X);
         int inverted = 0;
         const int u2 = solver.untangle(X, inverted);
         hooks.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +

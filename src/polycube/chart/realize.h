@@ -9,12 +9,16 @@
 //   1. start, either
 //      "continuation": from the deformed mesh (no tet inverted), the constrained coordinates travel
 //      to their plane heights (mean of the plane's deformed coordinates) in steps that keep every
-//      tet positive, the other coordinates following by the ARAP response and relaxing;
+//      tet positive, the other coordinates following by the ARAP response and relaxing (retried
+//      with the barrier 10x and 100x stronger when nearly flat tets stall it: rod, fandisk);
 //      "eq17": the valence-weighted relaxation of Eq. 17 with the same heights (a sparse
 //      least-squares solve per axis), then plain ARAP local/global steps while tets are inverted
 //      (these can get stuck: on box_hole one tet stays inverted);
 //   2. ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
-//      search that keeps every tet positive, and a barrier that only acts on nearly flat tets.
+//      search that keeps every tet positive, and a barrier that only acts on nearly flat tets; when
+//      a step comes out short, the next one also uses the barrier's Gauss-Newton Hessian (all axes
+//      coupled, one factorization): on cad/block this cut the time from 153 s to 8 s and the worst
+//      isometric distortion from 228 to 10.5.
 // Interior tet edges whose two ends lie on one plane would have to lie in the polycube's face: they
 // are split at their midpoint first (new interior vertices, appended).
 #pragma once
