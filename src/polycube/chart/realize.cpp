@@ -6,7 +6,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 #include <memory>
+#include <array>
 #include <numeric>
 
 #include "polycube/chart/labeling.h"
@@ -327,6 +329,8 @@ class Realizer {
         if (planes_.of_vertex[k][v] >= 0) gap(v, k) = planes_.height[k][planes_.of_vertex[k][v]] - X(v, k);
     double t = 0, dt = 1.0;
     steps = 0;
+    // Open up nearly flat tets of the start first (the unknowns only): any step would invert them.
+    minimize(X, Mode::Pinned, 5);
     while (t < 1) {
       const double t1 = std::min(1.0, t + dt);
       MatX3d Xt = X + extend((t1 - t) * gap);
@@ -606,7 +610,70 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       n = nn;
     }
   }
-  if (r.split_edges > 0) hooks.debug("split " + std::to_string(r.split_edges) + " interior edges lying on a plane");
+  // ---- split interior faces whose three vertices lie on one plane (their edges are boundary edges:
+  // the tets on both sides would have to flatten) at their centroid ----
+  {
+    auto same_plane3 = [&](int a, int b, int c) {
+      for (int k = 0; k < 3; ++k) {
+        const int p = planes.of_vertex[k][a];
+        if (p >= 0 && planes.of_vertex[k][b] == p && planes.of_vertex[k][c] == p) return true;
+      }
+      return false;
+    };
+    std::map<std::array<int, 3>, std::vector<int>> faces;  // sorted face -> tets
+    for (int t = 0; t < T.rows(); ++t)
+      for (int i = 0; i < 4; ++i) {
+        std::array<int, 3> f{T(t, kTetFaces[i][0]), T(t, kTetFaces[i][1]), T(t, kTetFaces[i][2])};
+        if (!same_plane3(f[0], f[1], f[2])) continue;
+        std::sort(f.begin(), f.end());
+        faces[f].push_back(t);
+      }
+    std::vector<char> used(T.rows(), 0);
+    std::vector<std::array<int, 4>> added;
+    std::vector<Vec3> new_rest, new_def;
+    for (const auto& [f, tets] : faces) {
+      if (tets.size() != 2 || used[tets[0]] || used[tets[1]]) continue;  // boundary face, or done
+      const int m = n + static_cast<int>(new_rest.size());
+      new_rest.push_back((rest.row(f[0]) + rest.row(f[1]) + rest.row(f[2])).transpose() / 3);
+      new_def.push_back((def.row(f[0]) + def.row(f[1]) + def.row(f[2])).transpose() / 3);
+      for (int t : tets) {
+        used[t] = 1;
+        const std::array<int, 4> orig{T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+        // Three tets: each face vertex in turn replaced by the centroid (same orientation).
+        bool first = true;
+        for (int fv : f) {
+          std::array<int, 4> nt = orig;
+          for (int& x : nt)
+            if (x == fv) x = m;
+          if (first) {
+            for (int j = 0; j < 4; ++j) T(t, j) = nt[j];
+            first = false;
+          } else {
+            added.push_back(nt);
+          }
+        }
+      }
+      r.split_faces++;
+    }
+    if (!new_rest.empty()) {
+      const int nt = static_cast<int>(T.rows());
+      T.conservativeResize(nt + static_cast<Eigen::Index>(added.size()), 4);
+      for (size_t i = 0; i < added.size(); ++i)
+        for (int j = 0; j < 4; ++j) T(nt + static_cast<Eigen::Index>(i), j) = added[i][j];
+      const int nn = n + static_cast<int>(new_rest.size());
+      rest.conservativeResize(nn, 3);
+      def.conservativeResize(nn, 3);
+      for (size_t i = 0; i < new_rest.size(); ++i) {
+        rest.row(n + static_cast<Eigen::Index>(i)) = new_rest[i].transpose();
+        def.row(n + static_cast<Eigen::Index>(i)) = new_def[i].transpose();
+      }
+      for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
+      n = nn;
+    }
+  }
+  if (r.split_edges + r.split_faces > 0)
+    hooks.debug("split " + std::to_string(r.split_edges) + " interior edges and " + std::to_string(r.split_faces) +
+                " interior faces lying on a plane");
   hooks.report("polycube", 0.1);
 
   Realizer solver(rest, T, planes, opt, hooks);

@@ -20,7 +20,8 @@
 //      coupled, one factorization): on cad/block this cut the time from 153 s to 8 s and the worst
 //      isometric distortion from 228 to 10.5.
 // Interior tet edges whose two ends lie on one plane would have to lie in the polycube's face: they
-// are split at their midpoint first (new interior vertices, appended).
+// are split at their midpoint first; interior faces whose three vertices lie on one plane, at their
+// centroid (new interior vertices, appended).
 #pragma once
 #include <string>
 #include <vector>
@@ -56,6 +57,7 @@ struct RealizeResult {
   MatX4i T;                      ///< tets over `rest` / `X` (the input tets, some split)
   MatX3d X;                      ///< polycube positions
   int split_edges = 0;           ///< interior edges split because both ends lie on one plane
+  int split_faces = 0;           ///< interior faces split (at the centroid) because their 3 vertices lie on one plane
   std::string start;             ///< start used ("continuation" or "eq17")
   int untangle_iterations = 0;   ///< continuation steps or untangling steps of the start used
   int iterations = 0;            ///< final ARAP iterations

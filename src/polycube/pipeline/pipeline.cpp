@@ -380,6 +380,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["realization"] = {{"success", rr.success},
                            {"start", rr.start},
                            {"split_edges", rr.split_edges},
+                           {"split_faces", rr.split_faces},
                            {"untangle_iterations", rr.untangle_iterations},
                            {"arap_iterations", rr.iterations},
                            {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
@@ -468,7 +469,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::write_obj(stage_path("map.obj"), map_V, surface.F);
       // Labels on the input surface and the deformed mesh too.
       io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
-      if (rr.split_edges > 0) {
+      if (rr.split_edges + rr.split_faces > 0) {
         // The tet mesh gained midpoints: rewrite it so that tetmesh.* and polycube.* stay a map.
         MeshData tmo;
         tmo.V = rr.rest;
@@ -478,6 +479,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         report["tetmesh"]["vertices"] = rr.rest.rows();
         report["tetmesh"]["tets"] = rr.T.rows();
         report["tetmesh"]["realization_edges_split"] = rr.split_edges;
+        report["tetmesh"]["realization_faces_split"] = rr.split_faces;
       }
       report["timings"]["polycube"] = sp.seconds();
       hooks.info("polycube: " + std::to_string(ex.charts.charts) + " charts, " + std::to_string(ex.charts.corners) +
