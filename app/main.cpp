@@ -118,7 +118,7 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
-  if (no_cleanup) opt.polycube.cleanup = {false, false, false};
+  if (no_cleanup) opt.polycube.cleanup = {false, false, false, false};
   auto logger = spdlog::stderr_color_mt("polycube");
   logger->set_pattern("%^[%l]%$ %v");
   logger->set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);

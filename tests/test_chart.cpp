@@ -192,3 +192,25 @@ TEST(Realize, BoxWithThroughHoleIsAValidGenusOnePolycube) {
   EXPECT_EQ(e.charts.corners, 16);
   EXPECT_GE(e.charts.non_disk_charts, 0);
 }
+
+TEST(Chart, CleanupSeparatesOppositeCharts) {
+  auto s = grid_box(8);
+  const auto good = chart::label_by_normal(s.V, s.F);
+  auto labels = good;
+  // A strip of the +Z face relabelled -Z, touching +Z: zero thickness if realized.
+  for (int f = 0; f < s.F.rows(); ++f) {
+    const double x = (s.V(s.F(f, 0), 0) + s.V(s.F(f, 1), 0) + s.V(s.F(f, 2), 0)) / 3;
+    if (good[f] == kPosZ && x < 0.25) labels[f] = kNegZ;
+  }
+  chart::CleanupOptions o;
+  o.remove_low_degree = false;  // the opposite rule alone
+  o.straighten = false;
+  const auto st = chart::cleanup_labels(s.V, s.F, labels, o);
+  EXPECT_GE(st.opposite, 1);
+  const auto r = chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels);
+  EXPECT_EQ(r.opposite_adjacent, 0);
+  for (int f = 0; f < s.F.rows(); ++f)
+    if (good[f] == kPosZ) {
+      EXPECT_NE(labels[f], kNegZ);
+    }
+}

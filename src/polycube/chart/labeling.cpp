@@ -201,6 +201,40 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
         changed = true;
       }
     }
+    if (!changed && opt.separate_opposite) {
+      // Opposite charts meeting (along an edge or at a vertex) would give the polycube zero
+      // thickness: the smaller one takes the label of its longest-bordered non-opposite neighbour.
+      const Charts c = build_charts(X, F, labels);
+      std::vector<std::vector<int>> vcharts(X.rows());
+      for (int f = 0; f < F.rows(); ++f)
+        for (int j = 0; j < 3; ++j) {
+          auto& l = vcharts[F(f, j)];
+          if (std::find(l.begin(), l.end(), c.of_face[f]) == l.end()) l.push_back(c.of_face[f]);
+        }
+      int worst = -1;
+      for (const auto& l : vcharts)
+        for (int a : l)
+          for (int b : l)
+            if (c.label[a] == (c.label[b] ^ 1)) {
+              const int small = c.area[a] <= c.area[b] ? a : b;
+              if (worst < 0 || c.area[small] < c.area[worst]) worst = small;
+            }
+      if (worst >= 0) {
+        int to = -1;
+        double len = -1;
+        for (auto [n, l] : c.neighbors[worst])
+          if ((c.label[n] ^ 1) != c.label[worst] && l > len) {
+            len = l;
+            to = n;
+          }
+        if (to >= 0) {
+          for (int f = 0; f < F.rows(); ++f)
+            if (c.of_face[f] == worst) labels[f] = c.label[to];
+          s.opposite++;
+          changed = true;
+        }
+      }
+    }
     if (!changed) break;
   }
   for (size_t f = 0; f < labels.size(); ++f) s.relabelled_faces += labels[f] != initial[f];

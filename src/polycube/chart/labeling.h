@@ -11,6 +11,9 @@
 //   3. charts of degree 1 take the surrounding label, charts of degree 2 the label of the
 //      neighbour sharing the longest border, and (not in the paper, needed rarely) charts of
 //      degree 3, which can only have three corners, likewise; smallest charts first;
+//   4. (not in the paper) when nothing else applies: of two charts with opposite labels that meet
+//      at an edge or a vertex (the polycube would have zero thickness there), the smaller takes the
+//      label of its longest-bordered neighbour that is not opposite to it;
 // all repeated until nothing changes.
 //
 // Valid chart graph (check_charts): no two adjacent charts with opposite labels; every corner
@@ -54,6 +57,7 @@ struct CleanupOptions {
   bool straighten = true;        ///< zigzag straightening (step 1)
   bool fix_degenerate = true;    ///< relabel triangles that would be flattened (step 2)
   bool remove_low_degree = true; ///< remove charts of degree 1, 2 (and 3) (step 3)
+  bool separate_opposite = true; ///< relabel the smaller of two opposite charts that meet (step 4)
   int max_rounds = 1000;         ///< cap on relabelling rounds (each round removes one chart or more)
 };
 
@@ -62,6 +66,7 @@ struct CleanupStats {
   int zigzags = 0;     ///< triangles relabelled by straightening
   int degenerate = 0;  ///< triangles relabelled because they would be flattened
   int degree1 = 0, degree2 = 0, degree3 = 0;  ///< charts removed, by degree
+  int opposite = 0;    ///< charts relabelled because they met a chart of the opposite label
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int rounds = 0;
 };
