@@ -14,6 +14,7 @@
 #include "polycube/chart/labeling.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
+#include "polycube/tetra/tetrahedralize.h"
 
 namespace polycube::chart {
 
@@ -559,56 +560,20 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         if (planes.of_vertex[k][u] >= 0 && planes.of_vertex[k][u] == planes.of_vertex[k][v]) return true;
       return false;
     };
-    for (int round = 0; round < 20; ++round) {
-      std::vector<std::pair<int, int>> cand;
-      for (auto e : unique_edges(T))
-        if (same_plane(e.first, e.second) && !std::binary_search(bedges.begin(), bedges.end(), e)) cand.push_back(e);
-      if (cand.empty()) break;
-      std::vector<std::vector<int>> tets(cand.size());
-      for (int t = 0; t < T.rows(); ++t)
-        for (int i = 0; i < 4; ++i)
-          for (int j = i + 1; j < 4; ++j) {
-            const std::pair<int, int> e(std::min(T(t, i), T(t, j)), std::max(T(t, i), T(t, j)));
-            auto it = std::lower_bound(cand.begin(), cand.end(), e);
-            if (it != cand.end() && *it == e) tets[it - cand.begin()].push_back(t);
-          }
-      std::vector<char> used(T.rows(), 0);
-      std::vector<std::array<int, 4>> added;
-      std::vector<Vec3> new_rest, new_def;
-      for (size_t e = 0; e < cand.size(); ++e) {
-        bool free = true;
-        for (int t : tets[e]) free = free && !used[t];
-        if (!free) continue;
-        const int m = n + static_cast<int>(new_rest.size());
-        const auto [u, v] = cand[e];
-        new_rest.push_back(0.5 * (rest.row(u) + rest.row(v)).transpose());
-        new_def.push_back(0.5 * (def.row(u) + def.row(v)).transpose());
-        for (int t : tets[e]) {
-          used[t] = 1;
-          std::array<int, 4> a{T(t, 0), T(t, 1), T(t, 2), T(t, 3)}, b = a;
-          for (int i = 0; i < 4; ++i) {
-            if (a[i] == v) a[i] = m;
-            if (b[i] == u) b[i] = m;
-          }
-          for (int i = 0; i < 4; ++i) T(t, i) = a[i];
-          added.push_back(b);
-        }
-        r.split_edges++;
-      }
-      const int nt = static_cast<int>(T.rows());
-      T.conservativeResize(nt + static_cast<Eigen::Index>(added.size()), 4);
-      for (size_t i = 0; i < added.size(); ++i)
-        for (int j = 0; j < 4; ++j) T(nt + static_cast<Eigen::Index>(i), j) = added[i][j];
-      const int nn = n + static_cast<int>(new_rest.size());
-      rest.conservativeResize(nn, 3);
-      def.conservativeResize(nn, 3);
-      for (size_t i = 0; i < new_rest.size(); ++i) {
-        rest.row(n + static_cast<Eigen::Index>(i)) = new_rest[i].transpose();
-        def.row(n + static_cast<Eigen::Index>(i)) = new_def[i].transpose();
-      }
-      for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
-      n = nn;
+    std::vector<std::pair<int, int>> cand;
+    for (auto e : unique_edges(T))
+      if (same_plane(e.first, e.second) && !std::binary_search(bedges.begin(), bedges.end(), e)) cand.push_back(e);
+    const auto made = split_tet_edges(T, n, cand);
+    const int nn = n + static_cast<int>(made.size());
+    rest.conservativeResize(nn, 3);
+    def.conservativeResize(nn, 3);
+    for (size_t i = 0; i < made.size(); ++i) {
+      rest.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (rest.row(made[i].first) + rest.row(made[i].second));
+      def.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (def.row(made[i].first) + def.row(made[i].second));
     }
+    for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
+    n = nn;
+    r.split_edges = static_cast<int>(made.size());
   }
   // ---- split interior faces whose three vertices lie on one plane (their edges are boundary edges:
   // the tets on both sides would have to flatten) at their centroid ----

@@ -1,5 +1,7 @@
 #include "polycube/tetra/tetrahedralize.h"
 
+#include "polycube/core/topology.h"
+
 #include <gmsh.h>
 
 #include <algorithm>
@@ -135,6 +137,68 @@ int split_boundary_tets(TetMesh& tm) {
     }
   }
   return static_cast<int>(split.size());
+}
+
+std::vector<std::pair<int, int>> split_tet_edges(MatX4i& T, int nv, std::vector<std::pair<int, int>> edges) {
+  std::vector<std::pair<int, int>> made;
+  while (!edges.empty()) {
+    std::vector<std::vector<int>> tets(edges.size());
+    for (int t = 0; t < T.rows(); ++t)
+      for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) {
+          const std::pair<int, int> e(std::min(T(t, i), T(t, j)), std::max(T(t, i), T(t, j)));
+          auto it = std::lower_bound(edges.begin(), edges.end(), e);
+          if (it != edges.end() && *it == e) tets[it - edges.begin()].push_back(t);
+        }
+    std::vector<char> used(T.rows(), 0);
+    std::vector<std::array<int, 4>> added;
+    std::vector<std::pair<int, int>> later;
+    for (size_t e = 0; e < edges.size(); ++e) {
+      bool free = !tets[e].empty();
+      for (int t : tets[e]) free = free && !used[t];
+      if (!free) {
+        if (!tets[e].empty()) later.push_back(edges[e]);
+        continue;
+      }
+      const int m = nv + static_cast<int>(made.size());
+      const auto [u, v] = edges[e];
+      made.push_back(edges[e]);
+      for (int t : tets[e]) {
+        used[t] = 1;
+        // Replacing one end of the edge by its midpoint keeps the orientation.
+        std::array<int, 4> a{T(t, 0), T(t, 1), T(t, 2), T(t, 3)}, b = a;
+        for (int i = 0; i < 4; ++i) {
+          if (a[i] == v) a[i] = m;
+          if (b[i] == u) b[i] = m;
+        }
+        for (int i = 0; i < 4; ++i) T(t, i) = a[i];
+        added.push_back(b);
+      }
+    }
+    const Eigen::Index nt = T.rows();
+    T.conservativeResize(nt + static_cast<Eigen::Index>(added.size()), 4);
+    for (size_t i = 0; i < added.size(); ++i)
+      for (int j = 0; j < 4; ++j) T(nt + static_cast<Eigen::Index>(i), j) = added[i][j];
+    edges = std::move(later);
+  }
+  return made;
+}
+
+int split_boundary_edges(TetMesh& tm) {
+  std::vector<char> on_boundary(tm.V.rows(), 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary[tm.boundary(f, k)] = 1;
+  const auto bedges = unique_edges(tm.boundary);
+  std::vector<std::pair<int, int>> cut;
+  for (const auto& e : unique_edges(tm.T))
+    if (on_boundary[e.first] && on_boundary[e.second] && !std::binary_search(bedges.begin(), bedges.end(), e))
+      cut.push_back(e);
+  const auto made = split_tet_edges(tm.T, static_cast<int>(tm.V.rows()), cut);
+  const Eigen::Index nv = tm.V.rows();
+  tm.V.conservativeResize(nv + static_cast<Eigen::Index>(made.size()), 3);
+  for (size_t i = 0; i < made.size(); ++i)
+    tm.V.row(nv + static_cast<Eigen::Index>(i)) = 0.5 * (tm.V.row(made[i].first) + tm.V.row(made[i].second));
+  return static_cast<int>(made.size());
 }
 
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {
