@@ -85,7 +85,6 @@ int main(int argc, char** argv) {
         tm = tetrahedralize(s, l, o, {});
       }
       split_boundary_tets(tm);
-      split_boundary_edges(tm);
       std::string p1 = "-", p2 = "-", p3 = "-", p4 = "-", p5 = "-";
       deform::DeformOptions dopt;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {

@@ -214,3 +214,26 @@ TEST(Chart, CleanupSeparatesOppositeCharts) {
       EXPECT_NE(labels[f], kNegZ);
     }
 }
+
+TEST(Realize, SplitTetEdgesKeepsVolumeAndOrientation) {
+  // Two tets sharing the edge (0, 1); splitting it and another edge of the first tet.
+  MatX3d V(5, 3);
+  V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0.3, 0.3, -1;
+  MatX4i T(2, 4);
+  T << 0, 1, 2, 3, 0, 2, 1, 4;
+  const double before = measure_tets(V, T).min_volume;
+  ASSERT_GT(before, 0);
+  const auto made = split_tet_edges(T, 5, {{0, 1}, {2, 3}});
+  ASSERT_EQ(made.size(), 2u);
+  MatX3d W(7, 3);
+  W.topRows(5) = V;
+  for (int i = 0; i < 2; ++i) W.row(5 + i) = 0.5 * (V.row(made[i].first) + V.row(made[i].second));
+  EXPECT_EQ(T.rows(), 6);  // (0,1): 2 tets -> 4; (2,3) is then in both halves of the first -> 6
+  double vol = 0, vol0 = tet_volume(V.row(0), V.row(1), V.row(2), V.row(3)) + tet_volume(V.row(0), V.row(2), V.row(1), V.row(4));
+  for (int t = 0; t < T.rows(); ++t) {
+    const double v = tet_volume(W.row(T(t, 0)), W.row(T(t, 1)), W.row(T(t, 2)), W.row(T(t, 3)));
+    EXPECT_GT(v, 0);
+    vol += v;
+  }
+  EXPECT_NEAR(vol, vol0, 1e-15);
+}

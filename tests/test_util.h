@@ -131,7 +131,7 @@ inline SurfaceMesh grid_box(int n, Vec3 lo = Vec3(0, 0, 0), Vec3 hi = Vec3(1, 1,
 }
 
 /// Tetrahedralizes a closed surface (target tet count, 0 = Gmsh's default sizing) and splits
-/// tets with four boundary vertices and interior edges between boundary vertices, as the pipeline does.
+/// tets with four boundary vertices, as the pipeline does.
 inline TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0) {
   MeshData m = make_mesh_data(V, F);
   SurfaceLayout l;
@@ -141,7 +141,6 @@ inline TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0
   o.target_tets = target_tets;
   TetMesh tm = tetrahedralize(s, l, o, {});
   split_boundary_tets(tm);
-  split_boundary_edges(tm);
   return tm;
 }
 

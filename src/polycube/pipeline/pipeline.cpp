@@ -264,20 +264,16 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
       // Tets with four boundary vertices would have to flatten on polycube faces: split them.
       const int split = split_boundary_tets(tm);
-      // ...and interior edges between two boundary vertices, which would have to lie in a face.
-      const int split_e = split_boundary_edges(tm);
-      if (split + split_e > 0) {
+      if (split > 0) {
         check_tet_mesh(tm, nullptr, "split tet mesh");
         const TetQuality sq = measure_tets(tm.V, tm.T);
         tj["vertices"] = tm.V.rows();
         tj["tets"] = tm.T.rows();
         tj["min_dihedral_deg"] = sq.min_dihedral_deg;
         tj["max_dihedral_deg"] = sq.max_dihedral_deg;
-        hooks.debug("split " + std::to_string(split) + " tets with four boundary vertices and " +
-                    std::to_string(split_e) + " interior edges between boundary vertices");
+        hooks.debug("split " + std::to_string(split) + " tets with four boundary vertices");
       }
       tj["boundary_tets_split"] = split;
-      tj["boundary_edges_split"] = split_e;
       report["tetmesh"] = tj;
       MeshData out_m;
       out_m.V = tm.V;

@@ -1,6 +1,5 @@
 #include "polycube/tetra/tetrahedralize.h"
 
-#include "polycube/core/topology.h"
 
 #include <gmsh.h>
 
@@ -182,23 +181,6 @@ std::vector<std::pair<int, int>> split_tet_edges(MatX4i& T, int nv, std::vector<
     edges = std::move(later);
   }
   return made;
-}
-
-int split_boundary_edges(TetMesh& tm) {
-  std::vector<char> on_boundary(tm.V.rows(), 0);
-  for (int f = 0; f < tm.boundary.rows(); ++f)
-    for (int k = 0; k < 3; ++k) on_boundary[tm.boundary(f, k)] = 1;
-  const auto bedges = unique_edges(tm.boundary);
-  std::vector<std::pair<int, int>> cut;
-  for (const auto& e : unique_edges(tm.T))
-    if (on_boundary[e.first] && on_boundary[e.second] && !std::binary_search(bedges.begin(), bedges.end(), e))
-      cut.push_back(e);
-  const auto made = split_tet_edges(tm.T, static_cast<int>(tm.V.rows()), cut);
-  const Eigen::Index nv = tm.V.rows();
-  tm.V.conservativeResize(nv + static_cast<Eigen::Index>(made.size()), 3);
-  for (size_t i = 0; i < made.size(); ++i)
-    tm.V.row(nv + static_cast<Eigen::Index>(i)) = 0.5 * (tm.V.row(made[i].first) + tm.V.row(made[i].second));
-  return static_cast<int>(made.size());
 }
 
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double h) {

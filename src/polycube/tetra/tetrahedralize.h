@@ -63,11 +63,6 @@ int split_boundary_tets(TetMesh& tm);
 /// at the midpoint, in any configuration).
 std::vector<std::pair<int, int>> split_tet_edges(MatX4i& T, int nv, std::vector<std::pair<int, int>> edges);
 
-/// Splits at their midpoint the interior edges whose two ends are on the boundary: afterwards every
-/// boundary vertex has only interior vertices across the volume, so no tet has to flatten where
-/// the boundary becomes planar (organic shapes with the input surface kept have many such edges).
-/// The boundary is unchanged; new vertices are appended. Returns the number of edges split.
-int split_boundary_edges(TetMesh& tm);
 
 /// Checks a tet mesh against the surface it was built from: no inverted or zero-volume tet,
 /// and when `surface` is given, a boundary equal to it (same oriented triangles on the first
