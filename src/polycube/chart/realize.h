@@ -36,7 +36,7 @@ struct RealizeOptions {
   std::string start = "auto";
   int max_iterations = 200;       ///< ARAP Newton iterations at most
   double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively
-  int untangle_iterations = 100;  ///< eq17 start: local/global steps at most to remove inverted tets
+  int untangle_iterations = 20;   ///< eq17 start: local/global steps at most to remove inverted tets (its wins on the shared meshes needed <= 3)
   /// Barrier weight (relative to ARAP) on tets whose volume ratio J = det(F) falls below
   /// tau = barrier_threshold x (median J): weight (log(J / tau))^2 below tau, 0 above. ARAP alone
   /// lets tets flatten where charts meet (box_hole: max isometric distortion 59 with 0.01 / 0.05,
