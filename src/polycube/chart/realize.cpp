@@ -31,11 +31,29 @@ std::unique_ptr<Cholmod> make_solver() {
   return s;
 }
 
-// Tet Jacobian determinant (volume ratio) of rest -> X.
-double volume_ratio(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest, int t) {
+// Volume ratio J = det(F) of tet t (rest -> X) and its gradient over the tet's 12 coordinates.
+struct TetJacobian {
+  double J = 0;
+  Eigen::Matrix<double, 12, 1> dJ;
+};
+TetJacobian tet_jacobian(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest, int t, bool gradient) {
+  TetJacobian r;
   Eigen::Matrix3d Ds;
   for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(T(t, m + 1)) - X.row(T(t, 0))).transpose();
-  return (Ds * rest.Dm_inv[t]).determinant();
+  const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+  const Eigen::Matrix3d F = Ds * Di;
+  r.J = F.determinant();
+  if (!gradient || !(r.J > 0)) return r;
+  const Eigen::Matrix3d dJdF = r.J * F.inverse().transpose();  // cofactor of F
+  Eigen::Matrix<double, 4, 3> Bm;                               // rows: dF/dx_p
+  Bm.bottomRows<3>() = Di;
+  Bm.row(0) = -Di.colwise().sum();
+  for (int p = 0; p < 4; ++p) r.dJ.segment<3>(3 * p) = dJdF * Bm.row(p).transpose();
+  return r;
+}
+
+double volume_ratio(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest, int t) {
+  return tet_jacobian(X, T, rest, t, false).J;
 }
 
 int count_inverted(const MatX3d& X, const MatX4i& T, const deform::ArapRest& rest) {
@@ -171,25 +189,14 @@ class Realizer {
     double E = deform::arap_energy(X, T_, arap_rest_, 1.0, g, nullptr);
     if (!barrier) return E;
     for (int t = 0; t < T_.rows(); ++t) {
-      Eigen::Matrix3d Ds;
-      const int v[4] = {T_(t, 0), T_(t, 1), T_(t, 2), T_(t, 3)};
-      for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(v[m + 1]) - X.row(v[0])).transpose();
-      const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
-      const Eigen::Matrix3d F = Ds * Di;
-      const double J = F.determinant();
-      if (!(J > 0)) return std::numeric_limits<double>::infinity();
-      if (J >= tau_) continue;
-      const double l = std::log(J / tau_);
+      const TetJacobian tj = tet_jacobian(X, T_, arap_rest_, t, g != nullptr);
+      if (!(tj.J > 0)) return std::numeric_limits<double>::infinity();
+      if (tj.J >= tau_) continue;
+      const double l = std::log(tj.J / tau_);
       const double w = barrier_weight_ * arap_rest_.w[t];
       E += w * l * l;
-      if (g) {
-        const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
-        Eigen::Matrix<double, 4, 3> Bm;
-        Bm.bottomRows<3>() = Di;
-        Bm.row(0) = -Di.colwise().sum();
-        const double c = 2 * w * l / J;
-        for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += c * dJdF * Bm.row(p).transpose();
-      }
+      if (g)
+        for (int p = 0; p < 4; ++p) g->segment<3>(3 * T_(t, p)) += (2 * w * l / tj.J) * tj.dJ.segment<3>(3 * p);
     }
     return E;
   }
@@ -239,25 +246,15 @@ class Realizer {
           if (a >= 0 && a == b) diag += it.value();
         }
     for (int t = 0; t < T_.rows(); ++t) {
-      Eigen::Matrix3d Ds;
-      const int v[4] = {T_(t, 0), T_(t, 1), T_(t, 2), T_(t, 3)};
-      for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(v[m + 1]) - X.row(v[0])).transpose();
-      const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
-      const Eigen::Matrix3d F = Ds * Di;
-      const double J = F.determinant();
-      if (!(J > 0) || J >= tau_) continue;
+      if (!(volume_ratio(X, T_, arap_rest_, t) < tau_)) continue;
+      const TetJacobian tj = tet_jacobian(X, T_, arap_rest_, t, true);
+      if (!(tj.J > 0)) continue;
       const double w = barrier_weight_ * arap_rest_.w[t];
-      const double b2 = 2 * w * (1 - std::log(J / tau_)) / (J * J);
-      const Eigen::Matrix3d dJdF = J * F.inverse().transpose();
-      Eigen::Matrix<double, 4, 3> Bm;
-      Bm.bottomRows<3>() = Di;
-      Bm.row(0) = -Di.colwise().sum();
-      Eigen::Matrix<double, 12, 1> dJ;
-      for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * Bm.row(p).transpose();
+      const double b2 = 2 * w * (1 - std::log(tj.J / tau_)) / (tj.J * tj.J);
       for (int p = 0; p < 12; ++p)
         for (int q = 0; q < 12; ++q) {
-          const int a = dof(v[p / 3], p % 3), b = dof(v[q / 3], q % 3);
-          if (a >= 0 && b >= 0 && a >= b) trip.emplace_back(a, b, b2 * dJ[p] * dJ[q]);
+          const int a = dof(T_(t, p / 3), p % 3), b = dof(T_(t, q / 3), q % 3);
+          if (a >= 0 && b >= 0 && a >= b) trip.emplace_back(a, b, b2 * tj.dJ[p] * tj.dJ[q]);
         }
     }
     const double reg = 1e-10 * diag / std::max(1, offset[3]);

@@ -9,20 +9,11 @@
 #include <sstream>
 
 #include "polycube/core/error.h"
+#include "polycube/core/topology.h"
 
 namespace polycube {
 
 namespace {
-
-struct UnionFind {
-  std::vector<int> p;
-  explicit UnionFind(int n) : p(n) { std::iota(p.begin(), p.end(), 0); }
-  int find(int x) {
-    while (p[x] != x) x = p[x] = p[p[x]];
-    return x;
-  }
-  void unite(int a, int b) { p[find(a)] = find(b); }
-};
 
 // One half-edge record per face corner: the edge from F(f,k) to F(f,(k+1)%3).
 struct HalfEdge {
