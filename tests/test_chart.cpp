@@ -237,3 +237,16 @@ TEST(Realize, SplitTetEdgesKeepsVolumeAndOrientation) {
   }
   EXPECT_NEAR(vol, vol0, 1e-15);
 }
+
+TEST(Realize, OppositeChartsSharingAPlaneFailWithAReason) {
+  auto b = grid_box(3);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  auto labels = chart::label_by_normal(tm.V, tm.boundary);
+  for (int f = 0; f < tm.boundary.rows(); ++f) {
+    const double x = (tm.V(tm.boundary(f, 0), 0) + tm.V(tm.boundary(f, 1), 0) + tm.V(tm.boundary(f, 2), 0)) / 3;
+    if (labels[f] == kPosZ && x < 0.3) labels[f] = kNegZ;  // no cleanup: realize as given
+  }
+  const auto r = chart::realize_polycube(tm.V, tm.T, tm.boundary, tm.V, labels);
+  EXPECT_FALSE(r.success);
+  EXPECT_NE(r.failure.find("zero thickness"), std::string::npos) << r.failure;
+}
