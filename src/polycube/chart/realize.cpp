@@ -353,8 +353,9 @@ class Realizer {
               }
               who += ")";
             }
-          blocked_ = std::to_string(count) + " tets would invert at t = " + std::to_string(t) + ", e.g. " + who +
-                     " (vertex:axes of its planes)";
+          blocked_ = count > 0 ? std::to_string(count) + " tets would invert at t = " + std::to_string(t) + ", e.g. " +
+                                     who + " (vertex:axes of its planes)"
+                               : std::to_string(max_steps) + " steps reached only t = " + std::to_string(t);
           return false;  // X: the last tangle-free state
         }
         continue;
