@@ -165,12 +165,9 @@ TEST(Realize, SphereGivesAnExactSixChartPolycube) {
 
 TEST(Realize, LBlockUnderRandomRotationsKeepsTwelveCorners) {
   MeshData l = examples::make("l_bracket", 0.08);
-  std::mt19937 rng(11);
-  std::normal_distribution<double> g;
+  const auto rotations = random_rotations(11, 3);
   for (int k = 0; k < 3; ++k) {
-    Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
-    q.normalize();
-    MatX3d V = l.V * q.toRotationMatrix().transpose();
+    MatX3d V = l.V * rotations[k].transpose();
     TetMesh tm = tet_mesh_of(V, l.F);
     const auto e = deform_and_extract(tm);
     expect_exact_polycube(e, tm);

@@ -62,12 +62,9 @@ TEST(Deform, TorusConverges) {
 TEST(Deform, RotatedLBracketFindsItsFrame) {
   // The same L-shaped block under three random rotations ends as the same 8-chart polycube.
   MeshData l = examples::make("l_bracket", 0.08);
-  std::mt19937 rng(7);
-  std::normal_distribution<double> g;
+  const auto rotations = random_rotations(7, 3);
   for (int k = 0; k < 3; ++k) {
-    Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
-    q.normalize();
-    MatX3d V = l.V * q.toRotationMatrix().transpose();
+    MatX3d V = l.V * rotations[k].transpose();
     TetMesh tm = tet_mesh_of(V, l.F);
     auto r = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
     EXPECT_LT(r.l1_quality, 1e-3) << "rotation " << k;

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <random>
 #include <sstream>
 #include <string>
 #include <sys/wait.h>
@@ -142,6 +143,19 @@ inline TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0
   TetMesh tm = tetrahedralize(s, l, o, {});
   split_boundary_tets(tm);
   return tm;
+}
+
+/// n random rotations (uniform quaternions from a seeded generator).
+inline std::vector<Eigen::Matrix3d> random_rotations(unsigned seed, int n) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> g;
+  std::vector<Eigen::Matrix3d> r;
+  for (int k = 0; k < n; ++k) {
+    Eigen::Quaterniond q(g(rng), g(rng), g(rng), g(rng));
+    q.normalize();
+    r.push_back(q.toRotationMatrix());
+  }
+  return r;
 }
 
 /// Concatenates two surfaces.

@@ -34,6 +34,25 @@ std::vector<std::pair<int, int>> unique_edges(
   return e;
 }
 
+SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* kept) {
+  std::vector<int> id(V.rows(), -1), back;
+  SurfaceMesh s;
+  s.F = F;
+  for (int f = 0; f < s.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      int& v = s.F(f, k);
+      if (id[v] < 0) {
+        id[v] = static_cast<int>(back.size());
+        back.push_back(v);
+      }
+      v = id[v];
+    }
+  s.V.resize(static_cast<Eigen::Index>(back.size()), 3);
+  for (size_t i = 0; i < back.size(); ++i) s.V.row(static_cast<Eigen::Index>(i)) = V.row(back[i]);
+  if (kept) *kept = std::move(back);
+  return s;
+}
+
 std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pair<int, int>>& edges) {
   std::vector<std::vector<int>> nb(nv);
   for (auto [a, b] : edges) {

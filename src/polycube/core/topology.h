@@ -27,6 +27,10 @@ MatX3i face_adjacency(const MatX3i& F);
 std::vector<std::pair<int, int>> unique_edges(const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic,
                                                                                     Eigen::RowMajor>>& E);
 
+/// The triangles F alone, with only their vertices, numbered in order of first use; `kept`
+/// (if given) receives the original index of every kept vertex.
+SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* kept = nullptr);
+
 /// Sorted neighbour lists of every vertex (0..nv) along the given undirected edges.
 std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pair<int, int>>& edges);
 

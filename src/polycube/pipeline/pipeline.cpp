@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "polycube/core/error.h"
+#include "polycube/core/topology.h"
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/closest_point.h"
 #include "polycube/io/writers.h"
@@ -178,20 +179,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       report["input"]["kind"] = "tet";
       TetInputReport tr;
       tm = prepare_tet_input(in, tr);
-      std::vector<int> map(tm.V.rows(), -1), back;
-      MatX3i BF = tm.boundary;
-      for (int f = 0; f < BF.rows(); ++f)
-        for (int k = 0; k < 3; ++k) {
-          int& v = BF(f, k);
-          if (map[v] < 0) {
-            map[v] = static_cast<int>(back.size());
-            back.push_back(v);
-          }
-          v = map[v];
-        }
-      MatX3d BV(back.size(), 3);
-      for (size_t i = 0; i < back.size(); ++i) BV.row(static_cast<Eigen::Index>(i)) = tm.V.row(back[i]);
-      MeshData bm = make_mesh_data(BV, BF, in.format);
+      std::vector<int> back;
+      const SurfaceMesh bs = compact_surface(tm.V, tm.boundary, &back);
+      MeshData bm = make_mesh_data(bs.V, bs.F, in.format);
       bm.path = in.path.empty() ? "input" : in.path + " (boundary of the tet mesh)";
       ValidateOptions vo = opt.validate;
       SurfaceReport sr = validate_surface(bm, layout, vo);
@@ -450,22 +440,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       df["label"].resize(B.rows() + tm.T.rows(), -1);
       write_deformed_vtk(df);
       {
-        // The polycube's boundary alone, compactly numbered.
-        std::vector<int> id(rr.X.rows(), -1);
-        std::vector<int> keep;
-        MatX3i SF = B;
-        for (int f = 0; f < SF.rows(); ++f)
-          for (int j = 0; j < 3; ++j) {
-            int& v = SF(f, j);
-            if (id[v] < 0) {
-              id[v] = static_cast<int>(keep.size());
-              keep.push_back(v);
-            }
-            v = id[v];
-          }
-        MatX3d SV(keep.size(), 3);
-        for (size_t i = 0; i < keep.size(); ++i) SV.row(static_cast<Eigen::Index>(i)) = rr.X.row(keep[i]);
-        io::write_obj(stage_path("polycube_surface.obj"), SV, SF);
+        const SurfaceMesh ps = compact_surface(rr.X, B);  // the polycube's boundary alone
+        io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
       }
       io::write_obj(stage_path("map.obj"), map_V, surface.F);
       // Labels on the input surface and the deformed mesh too.
