@@ -9,6 +9,7 @@
 
 #include "polycube/core/error.h"
 #include "polycube/examples/examples.h"
+#include "polycube/pipeline/measure.h"
 #include "polycube/pipeline/pipeline.h"
 
 using namespace polycube;
@@ -32,18 +33,47 @@ struct ProgressBar {
 
 }  // namespace
 
+// `polycube measure FILE [--ref SURFACE]`: quality of any hex mesh, as JSON on stdout.
+int measure_main(int argc, char** argv) {
+  CLI::App app{"polycube measure: scaled Jacobian (Verdict convention) of a hex mesh (.mesh, .vtk, .msh) and,\n"
+               "with --ref, the two-sided Hausdorff distance of its boundary to a reference surface.\n"
+               "Prints JSON on stdout. Exit codes: 0 ok, 2 usage, 3 unreadable input, 4 invalid mesh."};
+  MeasureOptions mo;
+  app.add_option("mesh", mo.path, "Hex mesh to measure")->required();
+  app.add_option("--ref", mo.reference, "Reference surface (OBJ, OFF, STL, PLY, or a volume mesh's boundary)");
+  app.add_option("--samples", mo.samples, "Hausdorff sample points per surface")
+      ->capture_default_str()->check(CLI::Range(0, 100000000));
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : 2;
+  }
+  try {
+    std::printf("%s\n", measure_mesh(mo).dump(2).c_str());
+    return 0;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "[error] %s\n", e.what());
+    return exit_code(e.kind());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "[error] internal error: %s\n", e.what());
+    return 70;
+  }
+}
+
 int main(int argc, char** argv) {
+  if (argc >= 2 && std::string(argv[1]) == "measure") return measure_main(argc - 1, argv + 1);
   CLI::App app{
       "polycube: l1-based polycube maps of 3D shapes and hex/quad remeshing.\n"
       "Reads a closed triangle surface (OBJ, OFF, STL, PLY), a tet or hex mesh (MEDIT .mesh, VTK, Gmsh .msh)\n"
       "or a CAD model (STEP, IGES, BREP), validates it, tetrahedralizes it and writes the results and\n"
       "report.json into the output folder. Lengths are relative to the input's bounding-box diagonal.\n"
       "Exit codes: 0 ok, 2 usage, 3 unreadable input, 4 invalid mesh, 5 tetrahedralization failed,\n"
-      "6 output not writable, 70 internal error."};
+      "6 output not writable, 7 no valid polycube or hex mesh, 70 internal error.\n"
+      "Also: polycube measure HEXMESH [--ref SURFACE] (see polycube measure --help)."};
   app.set_version_flag("--version", POLYCUBE_VERSION);
 
   PipelineOptions opt;
-  std::string until = to_string(last_available_stage());
+  std::string until = to_string(Stage::Polycube);
   std::string out_dir;
   bool quiet = false, verbose = false;
   app.add_option("input", opt.input, "Input mesh or CAD file");
@@ -53,7 +83,7 @@ int main(int argc, char** argv) {
                  "Surface edge length of the built-in examples, fraction of the bbox diagonal")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 0.5));
-  app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube (later: hex, quad)")
+  app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube, hex (later: quad)")
       ->capture_default_str();
   app.add_option("--edge-length", opt.tet.edge_length,
                  "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
@@ -107,6 +137,19 @@ int main(int argc, char** argv) {
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
   bool no_rotation = false;
   app.add_flag("--no-rotation", no_rotation, "Polycube deformation: keep the input orientation (no global rotation, Eq. 3)");
+  bool run_hex = false;
+  app.add_flag("--hex", run_hex, "Run through to the all-hex mesh (same as --until hex)");
+  auto& hx = opt.hex;
+  app.add_option("--hexes", hx.target_hexes, "Hex mesh: approximate number of grid hexes (0 = use --hex-size)")
+      ->capture_default_str()->check(CLI::Range(0, 100000000));
+  app.add_option("--hex-size", hx.hex_size, "Hex mesh: edge length, fraction of the bbox diagonal (when --hexes is 0)")
+      ->capture_default_str()->check(CLI::Range(1e-4, 1.0));
+  app.add_option("--pillow", hx.pillow,
+                 "Hex mesh: one layer of hexes along the boundary: on, off, or auto (both tried, the higher min "
+                 "scaled Jacobian wins)")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
+  app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
+      ->capture_default_str()->check(CLI::Range(0, 10000));
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");
@@ -118,6 +161,13 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  if (run_hex) {
+    if (app.count("--until") > 0 && until != "hex") {
+      std::fprintf(stderr, "[error] --hex contradicts --until %s\n", until.c_str());
+      return 2;
+    }
+    until = "hex";
+  }
   if (no_cleanup) opt.polycube.cleanup = {false, false, false, false};
   auto logger = spdlog::stderr_color_mt("polycube");
   logger->set_pattern("%^[%l]%$ %v");

@@ -154,11 +154,14 @@ TEST(Errors, InvertedTetsInTetMesh) {
 TEST(Errors, UsageErrors) {
   EXPECT_EQ(run_cli("").code, 2);
   EXPECT_EQ(run_cli("--example nosuch -o " + temp_dir("u")).code, 2);
-  RunResult r = run_cli("--example sphere --until hex -o " + temp_dir("u"));  // hex: a later issue
+  RunResult r = run_cli("--example sphere --until quad -o " + temp_dir("u"));  // quad: a later issue
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("not implemented yet"), std::string::npos) << r.output;
   EXPECT_EQ(run_cli("--example sphere --tet-algorithm foo").code, 2);
   EXPECT_EQ(run_cli("--bogus").code, 2);
+  EXPECT_EQ(run_cli("--example sphere --hex --until deform").code, 2);
+  EXPECT_EQ(run_cli("--example sphere --hex --pillow maybe").code, 2);
+  EXPECT_EQ(run_cli("measure").code, 2);
 }
 
 TEST(Errors, UnwritableOutput) {

@@ -75,7 +75,7 @@ void write_medit(const std::string& path, const MeshData& m) {
 }
 
 void write_vtk(const std::string& path, const MeshData& m, bool binary, const CellFields& fields,
-               const CellVectors& vectors) {
+               const CellVectors& vectors, const CellScalars& scalars) {
   File f(path, binary ? "wb" : "w");
   const long nc = (long)(m.F.rows() + m.Q.rows() + m.T.rows() + m.H.rows());
   const long size = (long)(4 * m.F.rows() + 5 * m.Q.rows() + 5 * m.T.rows() + 9 * m.H.rows());
@@ -118,7 +118,17 @@ void write_vtk(const std::string& path, const MeshData& m, bool binary, const Ce
   if (binary) std::fprintf(f.f, "\n");
   for (auto& [name, v] : vectors)
     POLYCUBE_ASSERT((long)v.rows() == nc, "cell vectors '" + name + "' size does not match the cell count");
-  if (!fields.empty() || !vectors.empty()) std::fprintf(f.f, "CELL_DATA %ld\n", nc);
+  for (auto& [name, v] : scalars)
+    POLYCUBE_ASSERT((long)v.size() == nc, "cell scalars '" + name + "' size does not match the cell count");
+  if (!fields.empty() || !vectors.empty() || !scalars.empty()) std::fprintf(f.f, "CELL_DATA %ld\n", nc);
+  for (auto& [name, v] : scalars) {
+    std::fprintf(f.f, "SCALARS %s double 1\nLOOKUP_TABLE default\n", name.c_str());
+    for (double x : v) {
+      if (binary) put_be<double>(f.f, x);
+      else std::fprintf(f.f, "%.9g\n", x);
+    }
+    if (binary) std::fprintf(f.f, "\n");
+  }
   for (auto& [name, v] : vectors) {
     std::fprintf(f.f, "VECTORS %s double\n", name.c_str());
     for (int i = 0; i < v.rows(); ++i) {

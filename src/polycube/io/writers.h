@@ -17,13 +17,15 @@ using CellFields = std::map<std::string, std::vector<int>>;
 /// 3-vector fields on the cells (same order); each is written as VECTORS and, with components in
 /// absolute value, as COLOR_SCALARS "<name>_rgb" (e.g. normals shown as colours, like the paper's Fig. 8).
 using CellVectors = std::map<std::string, MatX3d>;
+/// Real-valued fields on the cells (same order), e.g. the scaled Jacobian of every hex.
+using CellScalars = std::map<std::string, std::vector<double>>;
 
 /// MEDIT ASCII .mesh (MeshVersionFormatted 2). Any of F, Q, T, H may be empty.
 void write_medit(const std::string& path, const MeshData& m);
 /// Legacy VTK unstructured grid, ASCII or BINARY (big-endian), version 4.2 layout that ParaView,
 /// Gmsh and VTK >= 5 read. Cells are written as triangles, quads, tets, hexes in that order.
 void write_vtk(const std::string& path, const MeshData& m, bool binary = false, const CellFields& fields = {},
-               const CellVectors& vectors = {});
+               const CellVectors& vectors = {}, const CellScalars& scalars = {});
 void write_obj(const std::string& path, const MatX3d& V, const MatX3i& F);
 void write_off(const std::string& path, const MatX3d& V, const MatX3i& F);
 void write_stl(const std::string& path, const MatX3d& V, const MatX3i& F, bool binary);

@@ -11,6 +11,7 @@
 #include "polycube/core/topology.h"
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/closest_point.h"
+#include "polycube/hex/extract.h"
 #include "polycube/io/writers.h"
 #include "polycube/validate/tetmesh.h"
 
@@ -31,13 +32,13 @@ const char* to_string(Stage s) {
   return "?";
 }
 
-Stage last_available_stage() { return Stage::Polycube; }
+Stage last_available_stage() { return Stage::Hex; }
 
 Stage parse_stage(const std::string& name) {
   for (Stage s : {Stage::Load, Stage::Tet, Stage::Deform, Stage::Polycube, Stage::Hex, Stage::Quad})
     if (name == to_string(s)) {
       if (static_cast<int>(s) > static_cast<int>(last_available_stage()))
-        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform, polycube)");
+        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform, polycube, hex)");
       return s;
     }
   throw Error(ErrorKind::Usage, "unknown stage '" + name + "' (stages: load, tet, deform, polycube, hex, quad)");
@@ -46,7 +47,8 @@ Stage parse_stage(const std::string& name) {
 const std::vector<std::string>& output_files() {
   static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk",
                                              "deformed.mesh", "deformed.vtk", "labels.txt", "polycube.mesh",
-                                             "polycube.vtk", "polycube_surface.obj", "map.obj"};
+                                             "polycube.vtk", "polycube_surface.obj", "map.obj", "hex.mesh",
+                                             "hex.vtk"};
   return f;
 }
 
@@ -67,27 +69,10 @@ json bbox_json(const MatX3d& V) {
 
 // Boundary quads of hexes (outward for the convention of types.h), split into triangles.
 MeshData hex_boundary_surface(const MeshData& m) {
-  static const int q[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}, {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
-  std::map<std::array<int, 4>, std::pair<std::array<int, 4>, int>> faces;
-  for (int h = 0; h < m.H.rows(); ++h)
-    for (auto& f : q) {
-      std::array<int, 4> v{m.H(h, f[0]), m.H(h, f[1]), m.H(h, f[2]), m.H(h, f[3])}, k = v;
-      std::sort(k.begin(), k.end());
-      auto it = faces.find(k);
-      if (it == faces.end()) faces.emplace(k, std::make_pair(v, 1));
-      else it->second.second++;
-    }
-  std::vector<int> tri;
-  for (auto& [k, vc] : faces) {
-    if (vc.second > 2)
-      throw Error(ErrorKind::InvalidMesh, m.path + ": a hex face is shared by " + std::to_string(vc.second) + " hexes");
-    if (vc.second == 1) {
-      auto& v = vc.first;
-      tri.insert(tri.end(), {v[0], v[1], v[2], v[0], v[2], v[3]});
-    }
-  }
-  MatX3i F(static_cast<Eigen::Index>(tri.size() / 3), 3);
-  for (size_t i = 0; i < tri.size(); ++i) F(static_cast<Eigen::Index>(i / 3), static_cast<Eigen::Index>(i % 3)) = tri[i];
+  int nonmanifold = 0;
+  const MatX3i F = hex::triangulate_quads(hex::boundary_quads(m.H, &nonmanifold));
+  if (nonmanifold > 0)
+    throw Error(ErrorKind::InvalidMesh, m.path + ": " + std::to_string(nonmanifold) + " hex faces are shared by more than two hexes");
   MeshData s = make_mesh_data(m.V, F, m.format);
   s.path = m.path;
   return s;
@@ -463,6 +448,64 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  " corners, ARAP " + std::to_string(rr.arap) + ", max isometric distortion " +
                  std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
       hooks.report("polycube", 1);
+
+      // ---- hex --------------------------------------------------------------------------
+      if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Hex)) {
+        Stopwatch sh;
+        hooks.report("hex", 0);
+        hooks.info("extracting hexes");
+        const hex::HexResult hr =
+            hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, opt.hex, hooks);
+        if (hr.quality.inverted > 0)
+          throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
+                                               " hexes are inverted or degenerate after optimization (min scaled "
+                                               "Jacobian " + std::to_string(hr.quality.sj_min) +
+                                               "); try a smaller --hex-size");
+        MeshData hm;
+        hm.V = hr.V;
+        hm.H = hr.H;
+        io::write_medit(stage_path("hex.mesh"), hm);
+        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_hex}});
+        const MatX3i hexF = hex::triangulate_quads(hex::boundary_quads(hr.H));
+        const hex::Hausdorff hd = hex::hausdorff(hr.V, hexF, surface.V, surface.F);
+        Eigen::AlignedBox3d box;
+        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+        const double diag = box.diagonal().norm();
+        auto quality_json = [](const hex::HexQuality& q) {
+          json hist = json::array();
+          for (int c : q.histogram) hist.push_back(c);
+          return json{{"count", q.count},         {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
+                      {"sj_max", q.sj_max},       {"inverted", q.inverted},     {"below_0_2", q.below_0_2},
+                      {"below_0_5", q.below_0_5}, {"sj_histogram", hist}};
+        };
+        json hj = quality_json(hr.quality);
+        hj["hausdorff"] = hd.max;
+        hj["hausdorff_rel"] = hd.max / diag;
+        hj["hausdorff_hex_to_input"] = hd.a_to_b;
+        hj["hausdorff_input_to_hex"] = hd.b_to_a;
+        hj["mean_distance_rel"] = 0.5 * (hd.mean_a_to_b + hd.mean_b_to_a) / diag;
+        hj["vertices"] = hr.V.rows();
+        hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
+                      {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
+                      {"hexes", hr.grid_hexes}};
+        hj["pillow_hexes"] = hr.pillow_hexes;
+        hj["sharp_vertices"] = hr.sharp_vertices;
+        hj["variants"] = json::array();
+        for (const auto& t : hr.tried)
+          hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});
+        hj["extracted"] = quality_json(hr.extracted);
+        hj["extracted"].erase("sj_histogram");
+        hj["smooth_moves"] = hr.smooth_moves;
+        hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
+                         {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations}};
+        hj["seconds"] = sh.seconds();
+        report["hex"] = hj;
+        report["timings"]["hex"] = sh.seconds();
+        hooks.info("hex mesh: " + std::to_string(hr.quality.count) + " hexes, scaled Jacobian min " +
+                   std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
+                   ", Hausdorff " + std::to_string(hd.max / diag) + " of the bbox diagonal");
+        hooks.report("hex", 1);
+      }
     }
 
     // ---- publish ------------------------------------------------------------------------

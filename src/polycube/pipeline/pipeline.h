@@ -1,5 +1,5 @@
 // The whole job: load and validate an input, tetrahedralize it, deform it into a polycube, extract
-// the exact polycube and its map (later: hex/quad remeshing), write the outputs and report.json.
+// the exact polycube and its map, build the hex mesh (later: quad remeshing), write the outputs and report.json.
 //
 // Output protocol: files are written to OUTDIR/.staging and moved into OUTDIR only when every
 // stage asked for has succeeded; outputs of an earlier run are removed first. On failure OUTDIR
@@ -11,6 +11,7 @@
 #include "polycube/chart/extract.h"
 #include "polycube/core/log.h"
 #include "polycube/deform/solver.h"
+#include "polycube/hex/extract.h"
 #include "polycube/io/readers.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
@@ -38,6 +39,7 @@ struct PipelineOptions {
   TetOptions tet;
   deform::DeformOptions deform;
   chart::ExtractOptions polycube;
+  hex::HexOptions hex;
 };
 
 /// Names of every file the pipeline may write into the output folder.

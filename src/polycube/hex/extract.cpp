@@ -1,0 +1,340 @@
+#include "polycube/hex/extract.h"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <unordered_map>
+
+#include "polycube/core/error.h"
+#include "polycube/core/topology.h"
+#include "polycube/geometry/closest_point.h"
+#include "polycube/geometry/tet_locator.h"
+#include "polycube/hex/optimize.h"
+
+namespace polycube::hex {
+
+std::vector<int> snap_heights(const std::vector<double>& h, double s) {
+  std::vector<int> n(h.size());
+  for (size_t i = 0; i < h.size(); ++i) {
+    const long r = std::lround((h[i] - h[0]) * s);
+    n[i] = i == 0 ? 0 : static_cast<int>(std::max<long>(n[i - 1] + 1, r));
+  }
+  return n;
+}
+
+namespace {
+
+// Per-axis piecewise-linear map between polycube heights and snapped integers.
+struct AxisMap {
+  std::vector<double> h;  // sorted heights
+  std::vector<int> n;     // their integers
+  // Polycube coordinate of grid coordinate g (exact at the breakpoints).
+  double inverse(double g) const {
+    if (h.size() == 1) return h[0];
+    auto it = std::upper_bound(n.begin(), n.end(), g);
+    size_t i = it == n.begin() ? 0 : static_cast<size_t>(it - n.begin()) - 1;
+    i = std::min(i, n.size() - 2);
+    if (g == n[i]) return h[i];
+    if (g == n[i + 1]) return h[i + 1];
+    const double t = (g - n[i]) / static_cast<double>(n[i + 1] - n[i]);
+    return h[i] + t * (h[i + 1] - h[i]);
+  }
+};
+
+double tet_volume(const MatX3d& X, const MatX4i& T, int t) {
+  const Vec3 a = X.row(T(t, 0)), b = X.row(T(t, 1)), c = X.row(T(t, 2)), d = X.row(T(t, 3));
+  return (b - a).dot((c - a).cross(d - a)) / 6;
+}
+
+struct GridKeyHash {
+  size_t operator()(const std::array<int, 3>& k) const {
+    return (static_cast<size_t>(k[0]) * 73856093u) ^ (static_cast<size_t>(k[1]) * 19349663u) ^
+           (static_cast<size_t>(k[2]) * 83492791u);
+  }
+};
+
+
+// Per triangle, bit k set when its edge k (F(f,k), F(f,k+1)) is sharp: the normals of the two
+// triangles differ by more than angle_deg.
+std::vector<unsigned char> sharp_edges(const SurfaceMesh& s, double angle_deg) {
+  const MatX3i adj = face_adjacency(s.F);
+  const double c = std::cos(angle_deg * M_PI / 180);
+  auto normal = [&](int f) {
+    const Vec3 a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), d = s.V.row(s.F(f, 2));
+    const Vec3 n = (b - a).cross(d - a);
+    return n.norm() > 0 ? Vec3(n.normalized()) : n;
+  };
+  std::vector<unsigned char> sharp(s.F.rows(), 0);
+  for (int f = 0; f < s.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (adj(f, k) < 0 || normal(f).dot(normal(adj(f, k))) < c) sharp[f] |= 1 << k;
+  return sharp;
+}
+
+// Whether p lies within tol of a sharp edge of the triangles around its closest point.
+bool near_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
+                     const geometry::TriangleTree& tree, const Vec3& p, double tol) {
+  const int f0 = tree.closest(p).face;
+  for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
+    if (f < 0) continue;
+    for (int k = 0; k < 3; ++k) {
+      if (!(sharp[f] >> k & 1)) continue;
+      const Vec3 a = s.V.row(s.F(f, k)), b = s.V.row(s.F(f, (k + 1) % 3)), ab = b - a;
+      const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+      if ((a + t * ab - p).norm() <= tol) return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
+                                 const std::vector<int>& labels, const SurfaceMesh* target, const HexOptions& opt,
+                                 const Hooks& hooks) {
+  Stopwatch sw;
+  HexResult r;
+  POLYCUBE_ASSERT(static_cast<int>(labels.size()) == B.rows(), "one label per boundary triangle");
+  POLYCUBE_ASSERT(rest.rows() == X.rows(), "rest and polycube positions differ in size");
+
+  // ---- planes and scale ------------------------------------------------------------------
+  double volume = 0;
+  for (int t = 0; t < T.rows(); ++t) volume += tet_volume(X, T, t);
+  if (!(volume > 0)) throw Error(ErrorKind::Polycube, "the polycube has no volume: no hex mesh can be built");
+  Eigen::AlignedBox3d rest_box;
+  for (int v = 0; v < rest.rows(); ++v) rest_box.extend(rest.row(v).transpose());
+  const double diag = rest_box.diagonal().norm();
+  double s = 0;
+  if (opt.target_hexes > 0) {
+    s = std::cbrt(opt.target_hexes / volume);
+  } else {
+    if (!(opt.hex_size > 0)) throw Error(ErrorKind::Usage, "hex size must be positive");
+    s = 1 / (opt.hex_size * diag);
+  }
+  r.cells_per_unit = s;
+  std::array<AxisMap, 3> maps;
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> hk;
+    for (int f = 0; f < B.rows(); ++f)
+      if (labels[f] / 2 == k)
+        for (int j = 0; j < 3; ++j) hk.push_back(X(B(f, j), k));
+    std::sort(hk.begin(), hk.end());
+    // Realization makes every plane exact; merge only round-off-level differences.
+    const double tol = 1e-12 * std::max(diag, 1e-300);
+    std::vector<double> d;
+    for (double x : hk)
+      if (d.empty() || x - d.back() > tol) d.push_back(x);
+    if (d.size() < 2) throw Error(ErrorKind::Polycube, "the polycube has fewer than two planes along an axis");
+    maps[k].h = d;
+    maps[k].n = snap_heights(d, s);
+    r.heights[k] = d;
+    r.snapped[k] = maps[k].n;
+    r.cells[k] = maps[k].n.back();
+  }
+  const long long bbox_cells = 1LL * r.cells[0] * r.cells[1] * r.cells[2];
+  if (bbox_cells > 200000000LL)
+    throw Error(ErrorKind::Usage, "the hex grid would have " + std::to_string(bbox_cells) +
+                                      " cells in its bounding box: use a larger hex size or fewer hexes");
+  hooks.info("hex grid: " + std::to_string(r.cells[0]) + " x " + std::to_string(r.cells[1]) + " x " +
+             std::to_string(r.cells[2]) + " cells, " + std::to_string(maps[0].h.size()) + "/" +
+             std::to_string(maps[1].h.size()) + "/" + std::to_string(maps[2].h.size()) + " planes");
+
+  // ---- cells inside the snapped polycube ------------------------------------------------
+  const geometry::TetLocator loc(X, T);
+  auto to_polycube = [&](double gx, double gy, double gz) {
+    return Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz));
+  };
+  std::vector<std::array<int, 3>> cells;
+  for (int i = 0; i < r.cells[0]; ++i) {
+    hooks.report("hex", 0.4 * i / r.cells[0]);
+    for (int j = 0; j < r.cells[1]; ++j)
+      for (int k = 0; k < r.cells[2]; ++k) {
+        const geometry::TetHit hit = loc.locate(to_polycube(i + 0.5, j + 0.5, k + 0.5));
+        if (hit.tet >= 0 && hit.min_bary >= -1e-9) cells.push_back({i, j, k});
+      }
+  }
+  if (cells.empty()) throw Error(ErrorKind::Polycube, "no hex-grid cell lies inside the polycube");
+
+  // ---- vertices and hexes ---------------------------------------------------------------
+  std::unordered_map<std::array<int, 3>, int, GridKeyHash> vid;
+  std::vector<std::array<int, 3>> gv;
+  static constexpr int kCorner[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                                        {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+  MatX8i H(cells.size(), 8);
+  for (size_t c = 0; c < cells.size(); ++c)
+    for (int i = 0; i < 8; ++i) {
+      const std::array<int, 3> g{cells[c][0] + kCorner[i][0], cells[c][1] + kCorner[i][1], cells[c][2] + kCorner[i][2]};
+      auto [it, inserted] = vid.try_emplace(g, static_cast<int>(gv.size()));
+      if (inserted) gv.push_back(g);
+      H(c, i) = it->second;
+    }
+  const int nv = static_cast<int>(gv.size());
+  MatX3d V(nv, 3);
+  r.grid.resize(nv, 3);
+  for (int v = 0; v < nv; ++v) {
+    if (v % 4096 == 0) hooks.report("hex", 0.4 + 0.2 * v / nv);
+    r.grid.row(v) << gv[v][0], gv[v][1], gv[v][2];
+    const geometry::TetHit hit = loc.locate(to_polycube(gv[v][0], gv[v][1], gv[v][2]));
+    if (hit.min_bary < -1e-6) ++r.max_locate_outside;
+    Eigen::Vector4d b = hit.bary.cwiseMax(0.0);
+    b /= b.sum();
+    Vec3 p = Vec3::Zero();
+    for (int j = 0; j < 4; ++j) p += b[j] * rest.row(T(hit.tet, j)).transpose();
+    V.row(v) = p.transpose();
+  }
+  r.grid_hexes = static_cast<int>(H.rows());
+
+  // ---- boundary: polycube-edge vertices (fixed), projection --------------------------------
+  MatX4i Q = boundary_quads(H);
+  std::vector<int> axes_mask(nv, 0);  // bit k: the vertex is on a boundary quad normal to axis k
+  for (int q = 0; q < Q.rows(); ++q) {
+    int axis = 0;
+    for (int k = 0; k < 3; ++k)
+      if (gv[Q(q, 0)][k] == gv[Q(q, 1)][k] && gv[Q(q, 0)][k] == gv[Q(q, 2)][k] && gv[Q(q, 0)][k] == gv[Q(q, 3)][k]) axis = k;
+    for (int j = 0; j < 4; ++j) axes_mask[Q(q, j)] |= 1 << axis;
+  }
+  std::unique_ptr<geometry::TriangleTree> tree;
+  if (target && opt.project && target->F.rows() > 0) tree = std::make_unique<geometry::TriangleTree>(target->V, target->F);
+  std::vector<char> on_boundary(nv, 0);
+  for (int q = 0; q < Q.rows(); ++q)
+    for (int j = 0; j < 4; ++j) on_boundary[Q(q, j)] = 1;
+  if (tree)
+    for (int v = 0; v < nv; ++v)
+      if (on_boundary[v]) V.row(v) = tree->closest(V.row(v).transpose()).point.transpose();
+
+  // ---- features -----------------------------------------------------------------------
+  // Vertices on polycube edges that lie on a sharp edge of the target slide along the polycube
+  // edge (between their two edge neighbours); such polycube corners stay. Elsewhere (the target
+  // is smooth there) they move on the surface like the other boundary vertices.
+  std::vector<char> feature(nv, 0);
+  for (int v = 0; v < nv; ++v) feature[v] = on_boundary[v] && (axes_mask[v] & (axes_mask[v] - 1)) != 0;
+  if (tree) {
+    const std::vector<unsigned char> sharp = sharp_edges(*target, opt.sharp_angle_deg);
+    const MatX3i adj = face_adjacency(target->F);
+    double elen = 0;
+    for (int h = 0; h < r.grid_hexes; ++h) elen += (V.row(H(h, 0)) - V.row(H(h, 6))).norm() / std::sqrt(3.0);
+    elen /= std::max(1, r.grid_hexes);
+    for (int v = 0; v < nv; ++v)
+      if (feature[v] && !near_sharp_edge(*target, sharp, adj, *tree, V.row(v).transpose(), 0.05 * elen)) feature[v] = 0;
+  }
+  std::vector<std::array<int, 2>> slide(nv, {-1, -1});
+  for (int v = 0; v < nv; ++v) {
+    if (!feature[v] || __builtin_popcount(axes_mask[v]) != 2) continue;
+    const int c = axes_mask[v] == 3 ? 2 : axes_mask[v] == 5 ? 1 : 0;  // the edge's direction
+    std::array<int, 2> e{-1, -1};
+    for (int side = 0; side < 2; ++side) {
+      std::array<int, 3> g = gv[v];
+      g[c] += side ? 1 : -1;
+      auto it = vid.find(g);
+      if (it != vid.end() && on_boundary[it->second] && (axes_mask[it->second] & axes_mask[v]) == axes_mask[v])
+        e[side] = it->second;
+    }
+    if (e[0] >= 0 && e[1] >= 0) {
+      slide[v] = e;
+      feature[v] = 0;
+    }
+  }
+  for (int v = 0; v < nv; ++v) r.sharp_vertices += feature[v] || slide[v][0] >= 0;
+
+  // ---- pillowing and optimization -----------------------------------------------------------
+  struct Candidate {
+    MatX3d V;
+    MatX8i H;
+    HexQuality extracted, quality;
+    int pillow_hexes = 0, moves = 0;
+  };
+  auto finish = [&](bool pillow) {
+    Candidate c;
+    c.V = V;
+    c.H = H;
+    std::vector<char> fixed = feature;
+    std::vector<std::array<int, 2>> sl = slide;
+    if (pillow) {
+      // Outward vertex normals and mean boundary edge length.
+      MatX3d N = MatX3d::Zero(nv, 3);
+      double elen = 0;
+      for (int q = 0; q < Q.rows(); ++q) {
+        const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), cc = V.row(Q(q, 2)), d = V.row(Q(q, 3));
+        const Vec3 n = (cc - a).cross(d - b);  // twice the vector area
+        for (int j = 0; j < 4; ++j) N.row(Q(q, j)) += n.transpose();
+        elen += (b - a).norm() + (cc - b).norm() + (d - cc).norm() + (a - d).norm();
+      }
+      elen /= 4.0 * Q.rows();
+      const double t = opt.pillow_thickness * elen;
+      std::vector<int> inner(nv, -1);
+      int next = nv;
+      for (int v = 0; v < nv; ++v)
+        if (on_boundary[v]) inner[v] = next++;
+      c.V.conservativeResize(next, 3);
+      for (int v = 0; v < nv; ++v)
+        if (inner[v] >= 0) {
+          const double len = N.row(v).norm();
+          const Vec3 n = len > 0 ? Vec3(N.row(v).transpose() / len) : Vec3::Zero();
+          c.V.row(inner[v]) = V.row(v) - t * n.transpose();
+        }
+      c.H.resize(H.rows() + Q.rows(), 8);
+      for (int h = 0; h < H.rows(); ++h)
+        for (int i = 0; i < 8; ++i) c.H(h, i) = inner[H(h, i)] >= 0 ? inner[H(h, i)] : H(h, i);
+      for (int q = 0; q < Q.rows(); ++q) {
+        const int h = static_cast<int>(H.rows()) + q;
+        for (int j = 0; j < 4; ++j) {
+          c.H(h, j) = inner[Q(q, j)];
+          c.H(h, 4 + j) = Q(q, j);
+        }
+      }
+      c.pillow_hexes = static_cast<int>(Q.rows());
+      fixed.resize(next, 0);
+      sl.resize(next, {-1, -1});
+    }
+    c.extracted = hex_quality(c.V, c.H);
+    const OptimizeStats os = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), opt.smooth_iterations, hooks);
+    c.moves = os.laplacian_moves + os.optimized_moves;
+    c.quality = hex_quality(c.V, c.H);
+    hooks.debug(std::string(pillow ? "with" : "without") + " pillowing: scaled Jacobian min " +
+                std::to_string(c.quality.sj_min) + ", mean " + std::to_string(c.quality.sj_mean));
+    return c;
+  };
+  std::vector<bool> tries;
+  if (opt.pillow != "on") tries.push_back(false);
+  if (opt.pillow != "off") tries.push_back(true);
+  Candidate best;
+  bool have = false;
+  for (bool p : tries) {
+    Candidate c = finish(p);
+    r.tried.push_back({p ? "pillow" : "no_pillow", c.quality.sj_min, c.quality.sj_mean});
+    // Better: higher worst scaled Jacobian (beyond round-off), then higher mean.
+    if (!have || c.quality.sj_min > best.quality.sj_min + 1e-3 ||
+        (c.quality.sj_min > best.quality.sj_min - 1e-3 && c.quality.sj_mean > best.quality.sj_mean)) {
+      best = std::move(c);
+      have = true;
+    }
+  }
+  V = std::move(best.V);
+  H = std::move(best.H);
+  r.pillow_hexes = best.pillow_hexes;
+  r.extracted = best.extracted;
+  r.smooth_moves = best.moves;
+  r.grid.conservativeResize(V.rows(), 3);
+  for (int v = nv; v < V.rows(); ++v) r.grid.row(v).setConstant(-1);
+  {
+    std::vector<std::pair<double, int>> w;
+    for (int h = 0; h < H.rows(); ++h) w.push_back({scaled_jacobian(V, H, h), h});
+    std::sort(w.begin(), w.end());
+    for (int i = 0; i < std::min<int>(3, w.size()); ++i) {
+      std::string m = "worst hex " + std::to_string(w[i].second) + (w[i].second >= r.grid_hexes ? " (pillow)" : "") +
+                      ": scaled Jacobian at its corners and centre";
+      std::array<Vec3, 8> c;
+      for (int j = 0; j < 8; ++j) c[j] = V.row(H(w[i].second, j)).transpose();
+      for (double x : scaled_jacobian_samples(c)) m += " " + std::to_string(x).substr(0, 5);
+      hooks.debug(m);
+    }
+  }
+  r.V = std::move(V);
+  r.H = std::move(H);
+  r.quality = best.quality;
+  r.seconds = sw.seconds();
+  hooks.report("hex", 1);
+  return r;
+}
+
+}  // namespace polycube::hex

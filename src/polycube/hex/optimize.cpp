@@ -1,0 +1,168 @@
+#include "polycube/hex/optimize.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "polycube/hex/quality.h"
+
+namespace polycube::hex {
+
+namespace {
+
+constexpr int kEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                               {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+constexpr double kSoftMin = 10;  // sharpness of the soft minimum sum exp(-k sj)
+
+void sort_unique(std::vector<std::vector<int>>& lists) {
+  for (auto& l : lists) {
+    std::sort(l.begin(), l.end());
+    l.erase(std::unique(l.begin(), l.end()), l.end());
+  }
+}
+
+}  // namespace
+
+OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
+                             const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
+                             int sweeps, const Hooks& hooks) {
+  OptimizeStats st;
+  const int n = static_cast<int>(V.rows());
+  std::vector<std::vector<int>> vh(n), nb(n), bnb(n), vq(n);
+  for (int h = 0; h < H.rows(); ++h) {
+    for (int i = 0; i < 8; ++i) vh[H(h, i)].push_back(h);
+    for (const auto& e : kEdges) {
+      nb[H(h, e[0])].push_back(H(h, e[1]));
+      nb[H(h, e[1])].push_back(H(h, e[0]));
+    }
+  }
+  const MatX4i Q = boundary_quads(H);
+  std::vector<char> boundary(n, 0);
+  for (int q = 0; q < Q.rows(); ++q)
+    for (int j = 0; j < 4; ++j) {
+      boundary[Q(q, j)] = 1;
+      vq[Q(q, j)].push_back(q);
+      bnb[Q(q, j)].push_back(Q(q, (j + 1) % 4));
+      bnb[Q(q, (j + 1) % 4)].push_back(Q(q, j));
+    }
+  sort_unique(nb);
+  sort_unique(bnb);
+  std::vector<char> movable(n, 0);
+  for (int v = 0; v < n; ++v)
+    movable[v] = !(v < static_cast<int>(fixed.size()) && fixed[v]) && !(boundary[v] && !surface) && !vh[v].empty();
+
+  // Soft-min objective and worst scaled Jacobian of v's hexes with v at p.
+  auto eval = [&](int v, const Vec3& p, double& worst) {
+    double sum = 0;
+    worst = 1e300;
+    for (int h : vh[v]) {
+      std::array<Vec3, 8> c;
+      for (int i = 0; i < 8; ++i) c[i] = H(h, i) == v ? p : Vec3(V.row(H(h, i)).transpose());
+      for (double s : scaled_jacobian_samples(c)) {
+        worst = std::min(worst, s);
+        sum += std::exp(-kSoftMin * s);
+      }
+    }
+    return sum;
+  };
+  // Feature curves: the polyline through the positions at the call.
+  const MatX3d V0 = V;
+  auto on_curve = [&](int v) {
+    return v < static_cast<int>(slide.size()) && slide[v][0] >= 0 && slide[v][1] >= 0;
+  };
+  auto place = [&](int v, Vec3 p) {
+    if (on_curve(v)) {
+      const Vec3 x0 = V0.row(v).transpose();
+      Vec3 best = x0;
+      double bd = 1e300;
+      for (int e : slide[v]) {
+        const Vec3 a = V0.row(e).transpose(), ab = x0 - a;
+        const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 1.0;
+        const Vec3 q = a + t * ab;
+        if ((q - p).squaredNorm() < bd) {
+          bd = (q - p).squaredNorm();
+          best = q;
+        }
+      }
+      p = best;
+    }
+    return boundary[v] ? surface->closest(p).point : p;
+  };
+
+  for (int sweep = 0; sweep < sweeps; ++sweep) {
+    hooks.report("hex", 0.7 + 0.3 * sweep / sweeps);
+    ++st.sweeps;
+    int moves = 0;
+    // 1. smart Laplacian
+    for (int v = 0; v < n; ++v) {
+      if (!movable[v]) continue;
+      std::vector<int> curve_ring;
+      if (on_curve(v)) curve_ring = {slide[v][0], slide[v][1]};
+      const auto& ring = on_curve(v) ? curve_ring : boundary[v] ? bnb[v] : nb[v];
+      if (ring.empty()) continue;
+      Vec3 c = Vec3::Zero();
+      for (int u : ring) c += V.row(u).transpose();
+      c /= static_cast<double>(ring.size());
+      const Vec3 x = V.row(v).transpose();
+      double before, after;
+      eval(v, x, before);
+      for (double t : {1.0, 0.5, 0.25}) {
+        const Vec3 p = place(v, x + t * (c - x));
+        eval(v, p, after);
+        if (after > before + 1e-9 || (after >= before && after > 0.3)) {
+          V.row(v) = p.transpose();
+          ++moves;
+          ++st.laplacian_moves;
+          break;
+        }
+      }
+    }
+    // 2. optimization of the vertices of poor hexes
+    for (int v = 0; v < n; ++v) {
+      if (!movable[v]) continue;
+      const Vec3 x = V.row(v).transpose();
+      double m0;
+      const double f0 = eval(v, x, m0);
+      if (m0 >= 0.5) continue;
+      double len = 0;
+      for (int u : nb[v]) len += (V.row(u).transpose() - x).norm();
+      len /= std::max<size_t>(1, nb[v].size());
+      if (!(len > 0)) continue;
+      const double h = 1e-4 * len;
+      Vec3 g;
+      for (int k = 0; k < 3; ++k) {
+        Vec3 a = x, b = x;
+        a[k] += h;
+        b[k] -= h;
+        double w;
+        g[k] = (eval(v, a, w) - eval(v, b, w)) / (2 * h);
+      }
+      if (boundary[v]) {
+        Vec3 nrm = Vec3::Zero();
+        for (int q : vq[v]) {
+          const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), c = V.row(Q(q, 2)), d = V.row(Q(q, 3));
+          nrm += (c - a).cross(d - b);
+        }
+        if (nrm.norm() > 0) nrm.normalize();
+        g -= g.dot(nrm) * nrm;
+      }
+      if (!(g.norm() > 0)) continue;
+      const Vec3 d = -g.normalized();
+      double step = 0.3 * len;
+      for (int tries = 0; tries < 10; ++tries, step *= 0.5) {
+        const Vec3 p = place(v, x + step * d);
+        double m;
+        const double f = eval(v, p, m);
+        if (m > m0 + 1e-9 || (f < f0 && m >= m0)) {
+          V.row(v) = p.transpose();
+          ++moves;
+          ++st.optimized_moves;
+          break;
+        }
+      }
+    }
+    if (moves == 0) break;
+  }
+  return st;
+}
+
+}  // namespace polycube::hex

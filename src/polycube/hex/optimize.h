@@ -1,0 +1,33 @@
+// Hex-mesh optimization: vertices move to raise the worst scaled Jacobians, boundary vertices
+// staying on a surface. Two passes per sweep:
+//   1. "smart" Laplacian (Freitag 1997): a vertex moves (fully, half or a quarter of the way) to
+//      the mean of its edge neighbours (boundary vertices: of their boundary neighbours, then back
+//      onto the surface) when the worst scaled Jacobian of its hexes does not get worse;
+//   2. local optimization of vertices whose hexes are poor (worst scaled Jacobian < 0.5, or
+//      inverted): descent on the soft minimum sum exp(-k sj) over the 9 samples of each incident
+//      hex (finite-difference gradient, tangent to the surface on the boundary, backtracking
+//      line search accepting only moves that raise the worst scaled Jacobian). This untangles.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "polycube/core/log.h"
+#include "polycube/core/types.h"
+#include "polycube/geometry/closest_point.h"
+
+namespace polycube::hex {
+
+struct OptimizeStats {
+  int sweeps = 0;
+  int laplacian_moves = 0;
+  int optimized_moves = 0;
+};
+
+/// fixed[v] != 0: v never moves. slide[v] = {a, b} (when given and both >= 0): v only moves along
+/// the polyline a - v - b of the positions at the call (a feature curve, e.g. a polycube edge).
+/// surface: boundary vertices are kept on it (nullptr: they stay).
+OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
+                             const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
+                             int sweeps, const Hooks& hooks = {});
+
+}  // namespace polycube::hex

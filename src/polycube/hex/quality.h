@@ -1,0 +1,54 @@
+// Hex-mesh quality: the scaled Jacobian in the Verdict convention, and the two-sided Hausdorff
+// distance between two surfaces. Used by the hex stage and by `polycube measure`, so that our
+// meshes and other tools' meshes are measured the same way.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::hex {
+
+/// Local faces of a hexahedron (convention in core/types.h), oriented outward for a positive hex.
+inline constexpr int kHexFaces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
+                                        {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+
+/// Scaled Jacobian of one hex (Verdict's hex_scaled_jacobian): the minimum, over the 8 corners
+/// and the centre, of det of the three unit edge (or principal axis) vectors. 1 for a cube or
+/// any rectangular box, negative for an inverted hex, 0 when an edge has zero length.
+double scaled_jacobian(const std::array<Vec3, 8>& p);
+double scaled_jacobian(const MatX3d& V, const MatX8i& H, int h);
+/// The 9 values it is the minimum of: the 8 corners (in vertex order), then the centre.
+std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p);
+
+struct HexQuality {
+  int count = 0;
+  double sj_min = 0, sj_mean = 0, sj_max = 0;
+  int inverted = 0;      ///< scaled Jacobian <= 0
+  int below_0_2 = 0;
+  int below_0_5 = 0;
+  /// Histogram of the scaled Jacobian over [-1, 1] in 20 bins of 0.1 (bin 0 = [-1, -0.9)).
+  std::array<int, 20> histogram{};
+  std::vector<double> per_hex;  ///< scaled Jacobian of every hex
+};
+
+HexQuality hex_quality(const MatX3d& V, const MatX8i& H);
+
+/// Boundary quads of a hex mesh (faces used by one hex), oriented outward. Faces used by more than
+/// two hexes (a non-manifold mesh) are counted in *nonmanifold when given.
+MatX4i boundary_quads(const MatX8i& H, int* nonmanifold = nullptr);
+/// Quads split into two triangles each (along the 0-2 diagonal).
+MatX3i triangulate_quads(const MatX4i& Q);
+
+/// Two-sided Hausdorff distance between surfaces A and B, estimated by sampling: every vertex of a
+/// triangle and points spread on every triangle (about `samples` per surface, at least the vertices and
+/// centroids), each measured exactly to the other surface (closest point). Like Metro/M.E.S.H.
+struct Hausdorff {
+  double a_to_b = 0;     ///< max over samples of A of the distance to B
+  double b_to_a = 0;
+  double max = 0;        ///< two-sided: max of both
+  double mean_a_to_b = 0, mean_b_to_a = 0;
+};
+Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const MatX3i& FB, int samples = 200000);
+
+}  // namespace polycube::hex
