@@ -2,7 +2,10 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include <set>
+
 #include "polycube/examples/examples.h"
+#include "polycube/hex/quality.h"
 #include "polycube/io/readers.h"
 #include "polycube/io/writers.h"
 #include "polycube/validate/tetmesh.h"
@@ -32,9 +35,9 @@ TEST(Cli, ExampleList) {
 
 class CliExample : public ::testing::TestWithParam<std::string> {};
 
-TEST_P(CliExample, RunsToAnExactPolycube) {
+TEST_P(CliExample, RunsToAnExactPolycubeAndAValidHexMesh) {
   std::string out = temp_dir("ex_" + GetParam());
-  RunResult r = run_cli("--example " + GetParam() + " -o " + out);
+  RunResult r = run_cli("--example " + GetParam() + " --hex -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   json j = report(out);
   EXPECT_EQ(j["status"], "ok");
@@ -52,12 +55,38 @@ TEST_P(CliExample, RunsToAnExactPolycube) {
     EXPECT_EQ(m.T.rows(), j["tetmesh"]["tets"].get<int>());
     EXPECT_EQ(measure_tets(m.V, m.T).inverted, 0);
   }
-  // The main job ends with an exact polycube.
-  EXPECT_EQ(j["stopped_after"], "polycube");
+  // An exact polycube...
+  EXPECT_EQ(j["stopped_after"], "hex");
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
   EXPECT_EQ(j["polycube"]["planarity_error"], 0.0);
   EXPECT_EQ(j["polycube"]["misoriented_faces"], 0);
   EXPECT_TRUE(j["polycube"]["chart_graph"]["valid"].get<bool>()) << j["polycube"]["chart_graph"].dump();
+  // ... and a hex mesh with no inverted hex, close to the input, that reads back as written.
+  const json& h = j["hex"];
+  EXPECT_EQ(h["inverted"], 0);
+  EXPECT_GT(h["sj_min"].get<double>(), 0.15) << h.dump();
+  EXPECT_GT(h["sj_mean"].get<double>(), 0.8) << h.dump();
+  EXPECT_LT(h["hausdorff_rel"].get<double>(), 0.02) << h.dump();
+  for (const char* f : {"/hex.mesh", "/hex.vtk"}) {
+    MeshData m = io::read_mesh(out + f);
+    ASSERT_EQ(m.H.rows(), h["count"].get<int>()) << f;
+    EXPECT_EQ(m.V.rows(), h["vertices"].get<int>()) << f;
+    double mn = 2;
+    for (int e = 0; e < m.H.rows(); ++e) {
+      std::set<int> ids(m.H.row(e).data(), m.H.row(e).data() + 8);
+      EXPECT_EQ(ids.size(), 8u) << f << " hex " << e;
+      mn = std::min(mn, hex::scaled_jacobian(m.V, m.H, e));
+    }
+    EXPECT_EQ(mn, h["sj_min"].get<double>()) << f;
+  }
+  // At the input's position and scale: the bounding boxes differ by at most the Hausdorff distance
+  // (with a margin for its sampling).
+  const MeshData hm = io::read_mesh(out + "/hex.mesh");
+  const double tol = 1.5 * h["hausdorff"].get<double>() + 1e-9;
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(hm.V.col(k).minCoeff(), j["input"]["bbox"]["min"][k].get<double>(), tol);
+    EXPECT_NEAR(hm.V.col(k).maxCoeff(), j["input"]["bbox"]["max"][k].get<double>(), tol);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Examples, CliExample,
@@ -264,4 +293,21 @@ TEST(Cli, RemeshedSurfaceGetsItsMapByClosestPoints) {
       EXPECT_GE(map.V(v, k), lo[k] - 1e-9);
       EXPECT_LE(map.V(v, k), hi[k] + 1e-9);
     }
+}
+
+TEST(Cli, MeasureGivesTheHexStageFigures) {
+  const std::string out = temp_dir("measure");
+  ASSERT_EQ(run_cli("--example l_bracket --hex --hex-size 0.05 -o " + out).code, 0);
+  const json j = report(out);
+  RunResult r = run_cli("measure " + out + "/hex.vtk --ref " + out + "/surface.mesh");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json m = json::parse(r.output);
+  for (const char* k : {"count", "inverted", "below_0_5"}) EXPECT_EQ(m["hex"][k], j["hex"][k]) << k;
+  for (const char* k : {"sj_min", "sj_mean", "sj_max", "hausdorff_rel"})
+    EXPECT_NEAR(m["hex"][k].get<double>(), j["hex"][k].get<double>(), 1e-12) << k;
+  // Not a hex mesh, or no file: clear errors.
+  r = run_cli("measure " + out + "/surface.mesh");
+  EXPECT_EQ(r.code, 4);
+  EXPECT_NE(r.output.find("no hexahedra"), std::string::npos) << r.output;
+  EXPECT_EQ(run_cli("measure " + out + "/nosuch.mesh").code, 3);
 }

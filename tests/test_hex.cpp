@@ -1,0 +1,197 @@
+// Hex stage: scaled Jacobian, Hausdorff distance, point location, snapping and extraction on
+// shapes with known answers.
+#include <set>
+
+#include "polycube/chart/labeling.h"
+#include "polycube/examples/examples.h"
+#include "polycube/geometry/tet_locator.h"
+#include "polycube/hex/extract.h"
+#include "polycube/hex/quality.h"
+#include "test_util.h"
+
+using namespace polycube;
+using namespace polycube::test;
+
+namespace {
+
+std::array<Vec3, 8> unit_hex() {
+  return {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0),
+          Vec3(0, 0, 1), Vec3(1, 0, 1), Vec3(1, 1, 1), Vec3(0, 1, 1)};
+}
+
+// Hex mesh of an exact polycube given as a tet mesh: the polycube map is the identity.
+hex::HexResult hexes_of_polycube(const SurfaceMesh& s, const hex::HexOptions& o) {
+  const TetMesh tm = tet_mesh_of(s.V, s.F);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  return hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
+}
+
+}  // namespace
+
+TEST(Hex, ScaledJacobianKnownValues) {
+  auto p = unit_hex();
+  EXPECT_NEAR(hex::scaled_jacobian(p), 1.0, 1e-15);
+  // A rectangular box: still 1 (the measure ignores edge-length ratios).
+  for (auto& x : p) x = Vec3(3 * x.x(), 0.5 * x.y(), 7 * x.z());
+  EXPECT_NEAR(hex::scaled_jacobian(p), 1.0, 1e-15);
+  // Sheared: the top face moved by a along x; every corner and the centre give 1/sqrt(1+a^2).
+  for (double a : {0.3, 1.0, 2.5}) {
+    p = unit_hex();
+    for (int i = 4; i < 8; ++i) p[i].x() += a;
+    EXPECT_NEAR(hex::scaled_jacobian(p), 1 / std::sqrt(1 + a * a), 1e-14) << a;
+  }
+  // Inverted (top and bottom swapped): -1. Degenerate (collapsed edge): 0.
+  p = unit_hex();
+  std::array<Vec3, 8> q = {p[4], p[5], p[6], p[7], p[0], p[1], p[2], p[3]};
+  EXPECT_NEAR(hex::scaled_jacobian(q), -1.0, 1e-15);
+  p[1] = p[0];
+  EXPECT_EQ(hex::scaled_jacobian(p), 0.0);
+  // One corner pushed inside: negative at that corner only.
+  p = unit_hex();
+  p[6] = Vec3(0.2, 0.2, 0.2);
+  const auto s = hex::scaled_jacobian_samples(p);
+  EXPECT_LT(s[6], 0);
+  EXPECT_GT(s[0], 0);
+  EXPECT_EQ(hex::scaled_jacobian(p), *std::min_element(s.begin(), s.end()));
+}
+
+TEST(Hex, QualityStatisticsAndHistogram) {
+  MatX3d V(12, 3);
+  MatX8i H(2, 8);
+  const auto u = unit_hex();
+  for (int i = 0; i < 8; ++i) V.row(i) = u[i].transpose();
+  for (int i = 0; i < 4; ++i) V.row(8 + i) = (u[4 + i] + Vec3(1, 0, 1)).transpose();  // sheared top, a = 1
+  H << 0, 1, 2, 3, 4, 5, 6, 7, 4, 5, 6, 7, 8, 9, 10, 11;
+  const hex::HexQuality q = hex::hex_quality(V, H);
+  EXPECT_EQ(q.count, 2);
+  EXPECT_NEAR(q.sj_max, 1.0, 1e-15);
+  EXPECT_NEAR(q.sj_min, 1 / std::sqrt(2.0), 1e-14);
+  EXPECT_NEAR(q.sj_mean, (1 + 1 / std::sqrt(2.0)) / 2, 1e-14);
+  EXPECT_EQ(q.inverted, 0);
+  EXPECT_EQ(q.below_0_5, 0);
+  EXPECT_EQ(q.histogram[19], 1);  // [0.9, 1]
+  EXPECT_EQ(q.histogram[17], 1);  // 0.707 in [0.7, 0.8)
+}
+
+TEST(Hex, BoundaryQuadsAreOutward) {
+  // Two hexes side by side: 10 boundary quads, each facing away from the block's centre.
+  MatX3d V(12, 3);
+  for (int i = 0; i < 12; ++i) V.row(i) << i % 3, (i / 3) % 2, i / 6;
+  auto id = [](int x, int y, int z) { return x + 3 * y + 6 * z; };
+  MatX8i H(2, 8);
+  for (int h = 0; h < 2; ++h)
+    H.row(h) << id(h, 0, 0), id(h + 1, 0, 0), id(h + 1, 1, 0), id(h, 1, 0), id(h, 0, 1), id(h + 1, 0, 1),
+        id(h + 1, 1, 1), id(h, 1, 1);
+  const MatX4i Q = hex::boundary_quads(H);
+  ASSERT_EQ(Q.rows(), 10);
+  const Vec3 centre(1, 0.5, 0.5);
+  for (int q = 0; q < Q.rows(); ++q) {
+    const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), c = V.row(Q(q, 2)), d = V.row(Q(q, 3));
+    EXPECT_GT((c - a).cross(d - b).dot((a + b + c + d) / 4 - centre), 0) << q;
+  }
+  EXPECT_EQ(hex::triangulate_quads(Q).rows(), 20);
+}
+
+TEST(Hex, HausdorffKnownDistances) {
+  // Unit square vs the same square lifted by 0.25: 0.25 both ways.
+  MatX3d A(4, 3), B(4, 3), C(4, 3);
+  A << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  B = A;
+  B.col(2).setConstant(0.25);
+  MatX3i F(2, 3);
+  F << 0, 1, 2, 0, 2, 3;
+  hex::Hausdorff h = hex::hausdorff(A, F, B, F, 1000);
+  EXPECT_NEAR(h.a_to_b, 0.25, 1e-12);
+  EXPECT_NEAR(h.b_to_a, 0.25, 1e-12);
+  // Unit square vs its left half: 0.5 one way (the far edge), 0 the other.
+  C = A;
+  C(1, 0) = C(2, 0) = 0.5;
+  h = hex::hausdorff(A, F, C, F, 1000);
+  EXPECT_NEAR(h.a_to_b, 0.5, 1e-12);
+  EXPECT_NEAR(h.b_to_a, 0.0, 1e-12);
+  EXPECT_NEAR(h.max, 0.5, 1e-12);
+}
+
+TEST(Hex, TetLocatorFindsTheContainingTet) {
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
+  const TetMesh tm = tet_mesh_of(s.V, s.F, 2000);
+  const geometry::TetLocator loc(tm.V, tm.T);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int i = 0; i < 500; ++i) {
+    const Vec3 p(u(rng), 2 * u(rng), 3 * u(rng));
+    const geometry::TetHit h = loc.locate(p);
+    ASSERT_GE(h.tet, 0);
+    EXPECT_GE(h.min_bary, -1e-12);
+    Vec3 q = Vec3::Zero();
+    for (int j = 0; j < 4; ++j) q += h.bary[j] * tm.V.row(tm.T(h.tet, j)).transpose();
+    EXPECT_NEAR((q - p).norm(), 0, 1e-12);
+  }
+  // Outside: found, with a negative min barycentric coordinate.
+  EXPECT_LT(loc.locate(Vec3(1.5, 1, 1)).min_bary, -1e-3);
+}
+
+TEST(Hex, SnappingKeepsPlanesApartAndInOrder) {
+  // Two planes 0.01 apart keep one cell between them; the others round to the nearest integer.
+  const auto n = hex::snap_heights({0.0, 0.01, 1.0, 1.02, 2.26}, 10);
+  EXPECT_EQ(n, (std::vector<int>{0, 1, 10, 11, 23}));
+  const auto m = hex::snap_heights({-1.0, 0.5}, 3);
+  EXPECT_EQ(m, (std::vector<int>{0, 5}));
+}
+
+TEST(Hex, BoxGivesTheExactGrid) {
+  // A 1 x 2 x 3 box at 4 cells per unit: 4 x 8 x 12 hexes, every scaled Jacobian 1, the vertices
+  // on the grid (the polycube map is the identity), pillowing not chosen by "auto".
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
+  hex::HexOptions o;
+  o.target_hexes = 96 * 4;  // volume 6 -> 64 per unit volume -> 4 cells per unit
+  const hex::HexResult r = hexes_of_polycube(s, o);
+  EXPECT_NEAR(r.cells_per_unit, 4.0, 1e-9);
+  EXPECT_EQ(r.cells, (std::array<int, 3>{4, 8, 12}));
+  ASSERT_EQ(r.H.rows(), 4 * 8 * 12);
+  EXPECT_EQ(r.V.rows(), 5 * 9 * 13);
+  EXPECT_EQ(r.pillow_hexes, 0);
+  EXPECT_EQ(r.quality.inverted, 0);
+  EXPECT_NEAR(r.quality.sj_min, 1.0, 1e-9);
+  for (int v = 0; v < r.V.rows(); ++v)
+    for (int k = 0; k < 3; ++k) EXPECT_NEAR(r.V(v, k), r.grid(v, k) / 4.0, 1e-9);
+  // No repeated vertex inside a hex; every vertex used.
+  std::vector<int> used(r.V.rows(), 0);
+  for (int h = 0; h < r.H.rows(); ++h) {
+    std::set<int> ids(r.H.row(h).data(), r.H.row(h).data() + 8);
+    EXPECT_EQ(ids.size(), 8u);
+    for (int i : ids) used[i] = 1;
+  }
+  EXPECT_EQ(std::count(used.begin(), used.end(), 0), 0);
+}
+
+TEST(Hex, LBlockGivesTheExpectedCount) {
+  // The l_bracket example: [0,2]x[0,1]x[0,0.5] united with [0,0.5]x[0,1]x[0,2], volume 1.75;
+  // at 4 cells per unit: 112 hexes, all perfect.
+  const MeshData l = examples::make("l_bracket", 0.1);
+  hex::HexOptions o;
+  o.target_hexes = 112;
+  const hex::HexResult r = hexes_of_polycube({l.V, l.F}, o);
+  EXPECT_EQ(r.heights[0].size(), 3u);
+  EXPECT_EQ(r.snapped[0], (std::vector<int>{0, 2, 8}));
+  EXPECT_EQ(r.H.rows(), 112);
+  EXPECT_EQ(r.quality.inverted, 0);
+  EXPECT_NEAR(r.quality.sj_min, 1.0, 1e-9);
+}
+
+TEST(Hex, PillowedBoxHasOneLayerMoreAndNoInvertedHex) {
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
+  hex::HexOptions o;
+  o.target_hexes = 96 * 4;
+  o.pillow = "on";
+  const hex::HexResult r = hexes_of_polycube(s, o);
+  const int boundary = 2 * (4 * 8 + 8 * 12 + 4 * 12);
+  EXPECT_EQ(r.pillow_hexes, boundary);
+  EXPECT_EQ(r.H.rows(), 4 * 8 * 12 + boundary);
+  EXPECT_EQ(r.quality.inverted, 0);
+  // Hexes along the sharp edges of a pillowed box are sheared: about 0.7 at best.
+  EXPECT_GT(r.quality.sj_min, 0.4);
+  // The boundary stays on the box.
+  const MatX3i F = hex::triangulate_quads(hex::boundary_quads(r.H));
+  EXPECT_LT(hex::hausdorff(r.V, F, s.V, s.F, 20000).max, 1e-9);
+}
