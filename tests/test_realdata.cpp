@@ -95,13 +95,13 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealData, ::testing::ValuesIn(shared_mesh
 // polycube with a valid chart graph and no inverted tet.
 class RealPolycube : public ::testing::TestWithParam<std::string> {};
 
-TEST_P(RealPolycube, ReachesAnExactPolycube) {
+TEST_P(RealPolycube, ReachesAnExactPolycubeAndAValidHexMesh) {
   const std::string path = shared_dir() + "/meshes/" + GetParam();
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
   PipelineOptions opt;
   opt.input = path;
   opt.out_dir = temp_dir("real_polycube");
-  opt.until = Stage::Polycube;
+  opt.until = Stage::Hex;
   nlohmann::json j = run_pipeline(opt);
   const auto& p = j["polycube"];
   EXPECT_LT(p["l1_quality"].get<double>(), 1e-3);
@@ -111,6 +111,11 @@ TEST_P(RealPolycube, ReachesAnExactPolycube) {
   EXPECT_EQ(p["planarity_error"], 0.0);
   EXPECT_EQ(p["misoriented_faces"], 0);
   EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
+  const auto& h = j["hex"];
+  EXPECT_EQ(h["inverted"], 0);
+  EXPECT_GT(h["sj_min"].get<double>(), 0.3) << h.dump();
+  EXPECT_GT(h["sj_mean"].get<double>(), 0.85) << h.dump();
+  EXPECT_LT(h["hausdorff_rel"].get<double>(), 0.015) << h.dump();
 }
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,

@@ -234,7 +234,12 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       feature[v] = 0;
     }
   }
-  for (int v = 0; v < nv; ++v) r.sharp_vertices += feature[v] || slide[v][0] >= 0;
+  // Polycube corners are not fixed: where the input has no corner (a polycube edge turning along a
+  // straight sharp edge of the input) a fixed corner would keep a flat hex corner (block, mambo_B9).
+  for (int v = 0; v < nv; ++v) {
+    if (opt.free_corners) feature[v] = 0;
+    r.sharp_vertices += feature[v] || slide[v][0] >= 0;
+  }
 
   // ---- pillowing and optimization -----------------------------------------------------------
   struct Candidate {
@@ -242,6 +247,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     MatX8i H;
     HexQuality extracted, quality;
     int pillow_hexes = 0, moves = 0;
+    std::vector<char> fixed;
+    std::vector<std::array<int, 2>> slide;
   };
   auto finish = [&](bool pillow) {
     Candidate c;
@@ -250,28 +257,28 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     std::vector<char> fixed = feature;
     std::vector<std::array<int, 2>> sl = slide;
     if (pillow) {
-      // Outward vertex normals and mean boundary edge length.
-      MatX3d N = MatX3d::Zero(nv, 3);
-      double elen = 0;
-      for (int q = 0; q < Q.rows(); ++q) {
-        const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), cc = V.row(Q(q, 2)), d = V.row(Q(q, 3));
-        const Vec3 n = (cc - a).cross(d - b);  // twice the vector area
-        for (int j = 0; j < 4; ++j) N.row(Q(q, j)) += n.transpose();
-        elen += (b - a).norm() + (cc - b).norm() + (d - cc).norm() + (a - d).norm();
+      // Inner copies: each boundary vertex moves a fraction of the way to the mean centroid of its
+      // hexes, so the layer's thickness follows the local hex size (thin parts included) and
+      // every inner copy starts inside the hexes it came from.
+      std::vector<Vec3> centre(nv, Vec3::Zero());
+      std::vector<int> count(nv, 0);
+      for (int h = 0; h < H.rows(); ++h) {
+        Vec3 m = Vec3::Zero();
+        for (int i = 0; i < 8; ++i) m += V.row(H(h, i)).transpose();
+        m /= 8;
+        for (int i = 0; i < 8; ++i) {
+          centre[H(h, i)] += m;
+          ++count[H(h, i)];
+        }
       }
-      elen /= 4.0 * Q.rows();
-      const double t = opt.pillow_thickness * elen;
       std::vector<int> inner(nv, -1);
       int next = nv;
       for (int v = 0; v < nv; ++v)
         if (on_boundary[v]) inner[v] = next++;
       c.V.conservativeResize(next, 3);
       for (int v = 0; v < nv; ++v)
-        if (inner[v] >= 0) {
-          const double len = N.row(v).norm();
-          const Vec3 n = len > 0 ? Vec3(N.row(v).transpose() / len) : Vec3::Zero();
-          c.V.row(inner[v]) = V.row(v) - t * n.transpose();
-        }
+        if (inner[v] >= 0)
+          c.V.row(inner[v]) = V.row(v) + opt.pillow_thickness * (centre[v] / count[v] - V.row(v).transpose()).transpose();
       c.H.resize(H.rows() + Q.rows(), 8);
       for (int h = 0; h < H.rows(); ++h)
         for (int i = 0; i < 8; ++i) c.H(h, i) = inner[H(h, i)] >= 0 ? inner[H(h, i)] : H(h, i);
@@ -290,6 +297,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     const OptimizeStats os = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), opt.smooth_iterations, hooks);
     c.moves = os.laplacian_moves + os.optimized_moves;
     c.quality = hex_quality(c.V, c.H);
+    c.fixed = fixed;
+    c.slide = sl;
     hooks.debug(std::string(pillow ? "with" : "without") + " pillowing: scaled Jacobian min " +
                 std::to_string(c.quality.sj_min) + ", mean " + std::to_string(c.quality.sj_mean));
     return c;
@@ -326,6 +335,15 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       std::array<Vec3, 8> c;
       for (int j = 0; j < 8; ++j) c[j] = V.row(H(w[i].second, j)).transpose();
       for (double x : scaled_jacobian_samples(c)) m += " " + std::to_string(x).substr(0, 5);
+      m += "; vertices";
+      const MatX4i Qb = boundary_quads(H);
+      std::vector<char> bnd(V.rows(), 0);
+      for (int q = 0; q < Qb.rows(); ++q)
+        for (int j = 0; j < 4; ++j) bnd[Qb(q, j)] = 1;
+      for (int j = 0; j < 8; ++j) {
+        const int v = H(w[i].second, j);
+        m += best.fixed[v] ? " fixed" : best.slide[v][0] >= 0 ? " sliding" : bnd[v] ? " boundary" : " inner";
+      }
       hooks.debug(m);
     }
   }

@@ -44,8 +44,12 @@ struct HexOptions {
   /// Dihedral angle (degrees) above which an edge of the target surface is a sharp feature: hex
   /// vertices on polycube edges that lie on one slide along it, the others move freely on the surface.
   double sharp_angle_deg = 30;
-  /// Pillow layer thickness, as a fraction of the mean boundary edge length.
-  double pillow_thickness = 0.35;
+  /// Polycube corners move on the surface like other boundary vertices (else those on sharp input
+  /// features stay where the map put them).
+  bool free_corners = true;
+  /// Pillow layer thickness: each boundary vertex's inner copy starts this fraction of the way to
+  /// the mean centroid of its hexes.
+  double pillow_thickness = 0.5;
 };
 
 struct HexResult {
