@@ -140,10 +140,12 @@ int main(int argc, char** argv) {
   bool run_hex = false;
   app.add_flag("--hex", run_hex, "Run through to the all-hex mesh (same as --until hex)");
   auto& hx = opt.hex;
-  app.add_option("--hexes", hx.target_hexes, "Hex mesh: approximate number of grid hexes (0 = use --hex-size)")
-      ->capture_default_str()->check(CLI::Range(0, 100000000));
-  app.add_option("--hex-size", hx.hex_size, "Hex mesh: edge length, fraction of the bbox diagonal (when --hexes is 0)")
-      ->capture_default_str()->check(CLI::Range(1e-4, 1.0));
+  app.add_option("--hexes", hx.target_hexes,
+                 "Hex mesh: approximate number of grid hexes (pillowing adds a boundary layer)")
+      ->capture_default_str()->check(CLI::Range(1, 100000000));
+  app.add_option("--hex-size", hx.hex_size,
+                 "Hex mesh: edge length, fraction of the bbox diagonal; overrides --hexes (0 = off)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--pillow", hx.pillow,
                  "Hex mesh: one layer of hexes along the boundary: on, off, or auto (both tried, the higher min "
                  "scaled Jacobian wins)")

@@ -7,6 +7,7 @@
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/extract.h"
 #include "polycube/hex/quality.h"
+#include "polycube/hex/snap.h"
 #include "test_util.h"
 
 using namespace polycube;
@@ -137,6 +138,32 @@ TEST(Hex, SnappingKeepsPlanesApartAndInOrder) {
   EXPECT_EQ(n, (std::vector<int>{0, 1, 10, 11, 23}));
   const auto m = hex::snap_heights({-1.0, 0.5}, 3);
   EXPECT_EQ(m, (std::vector<int>{0, 5}));
+}
+
+TEST(Hex, ConstrainedSnappingMergesOnlyPlanesThatDoNotFaceEachOther) {
+  // Plane 1 is 0.01 above plane 0: merged unless they face each other.
+  EXPECT_EQ(hex::snap_heights({0.0, 0.01, 1.0}, 10, {{}, {}, {}}), (std::vector<int>{0, 0, 10}));
+  EXPECT_EQ(hex::snap_heights({0.0, 0.01, 1.0}, 10, {{1}, {}, {}}), (std::vector<int>{0, 1, 10}));
+  EXPECT_EQ(hex::snap_heights({0.0, 0.01, 1.0}, 10, {{1}, {2}, {}}), (std::vector<int>{0, 1, 10}));
+  // Two separate boxes whose tops are 0.01 apart: the tops share an integer; the plain sorted
+  // snapping would put a cell between them. Every plane vertex lands on its integer, no tet inverts.
+  const SurfaceMesh two = merge(box(Vec3(0, 0, 0), Vec3(1, 1, 1)), box(Vec3(2, 0, 0), Vec3(3, 1, 1.01)));
+  const TetMesh tm = tet_mesh_of(two.V, two.F, 3000);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  const hex::Snapping c = hex::snap_polycube(tm.V, tm.T, tm.boundary, labels, 4, true);
+  ASSERT_EQ(c.heights[2].size(), 3u);
+  EXPECT_EQ(c.snapped[2], (std::vector<int>{0, 4, 4}));
+  EXPECT_EQ(c.shared[2], 2);
+  EXPECT_EQ(c.inverted, 0);
+  for (int v = 0; v < tm.V.rows(); ++v) {
+    if (tm.V(v, 2) > 0.99) {
+      EXPECT_EQ(c.Y(v, 2), 4.0);
+    }
+  }
+  const hex::Snapping p = hex::snap_polycube(tm.V, tm.T, tm.boundary, labels, 4, false);
+  EXPECT_EQ(p.snapped[2], (std::vector<int>{0, 4, 5}));
+  // Through the volume (x: 0 | 1, 2 | 3) planes keep their order and distance.
+  EXPECT_EQ(c.snapped[0], (std::vector<int>{0, 4, 8, 12}));
 }
 
 TEST(Hex, BoxGivesTheExactGrid) {

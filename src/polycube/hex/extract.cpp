@@ -10,17 +10,9 @@
 #include "polycube/geometry/closest_point.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/optimize.h"
+#include "polycube/hex/snap.h"
 
 namespace polycube::hex {
-
-std::vector<int> snap_heights(const std::vector<double>& h, double s) {
-  std::vector<int> n(h.size());
-  for (size_t i = 0; i < h.size(); ++i) {
-    const long r = std::lround((h[i] - h[0]) * s);
-    n[i] = i == 0 ? 0 : static_cast<int>(std::max<long>(n[i - 1] + 1, r));
-  }
-  return n;
-}
 
 namespace {
 
@@ -105,31 +97,39 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   for (int v = 0; v < rest.rows(); ++v) rest_box.extend(rest.row(v).transpose());
   const double diag = rest_box.diagonal().norm();
   double s = 0;
-  if (opt.target_hexes > 0) {
-    s = std::cbrt(opt.target_hexes / volume);
-  } else {
-    if (!(opt.hex_size > 0)) throw Error(ErrorKind::Usage, "hex size must be positive");
+  if (opt.hex_size > 0) {
     s = 1 / (opt.hex_size * diag);
+  } else {
+    if (opt.target_hexes <= 0) throw Error(ErrorKind::Usage, "give a positive hex count or hex size");
+    s = std::cbrt(opt.target_hexes / volume);
   }
   r.cells_per_unit = s;
+  // Snapping: planes that face each other keep their order and a cell between them, the others may
+  // share an integer; the polycube deformed to the snapped planes (Y, grid units) must keep every
+  // tet positive, else the plain sorted snapping is tried, and last the per-axis piecewise-linear
+  // map of the sorted snapping (exact, but it stretches slabs between planes that do not interact).
+  Snapping sn = snap_polycube(X, T, B, labels, s, true);
+  r.snapping = "constrained";
+  // A few inverted slivers of negligible volume (in cells) do not matter to point location.
+  const double kNegligible = 0.05;
+  if (sn.inverted_volume > kNegligible) {
+    hooks.debug("constrained snapping inverts " + std::to_string(sn.inverted) + " tets (" + std::to_string(sn.inverted_volume) + " cells); trying sorted snapping");
+    sn = snap_polycube(X, T, B, labels, s, false);
+    r.snapping = "sorted";
+  }
   std::array<AxisMap, 3> maps;
+  const bool piecewise = sn.inverted_volume > kNegligible;
+  if (piecewise) {
+    hooks.debug("sorted snapping inverts " + std::to_string(sn.inverted) + " tets; using the piecewise-linear map");
+    r.snapping = "piecewise_linear";
+  }
   for (int k = 0; k < 3; ++k) {
-    std::vector<double> hk;
-    for (int f = 0; f < B.rows(); ++f)
-      if (labels[f] / 2 == k)
-        for (int j = 0; j < 3; ++j) hk.push_back(X(B(f, j), k));
-    std::sort(hk.begin(), hk.end());
-    // Realization makes every plane exact; merge only round-off-level differences.
-    const double tol = 1e-12 * std::max(diag, 1e-300);
-    std::vector<double> d;
-    for (double x : hk)
-      if (d.empty() || x - d.back() > tol) d.push_back(x);
-    if (d.size() < 2) throw Error(ErrorKind::Polycube, "the polycube has fewer than two planes along an axis");
-    maps[k].h = d;
-    maps[k].n = snap_heights(d, s);
-    r.heights[k] = d;
-    r.snapped[k] = maps[k].n;
-    r.cells[k] = maps[k].n.back();
+    maps[k].h = sn.heights[k];
+    maps[k].n = sn.snapped[k];
+    r.heights[k] = sn.heights[k];
+    r.snapped[k] = sn.snapped[k];
+    r.cells[k] = *std::max_element(sn.snapped[k].begin(), sn.snapped[k].end());
+    r.shared_planes += sn.shared[k];
   }
   const long long bbox_cells = 1LL * r.cells[0] * r.cells[1] * r.cells[2];
   if (bbox_cells > 200000000LL)
@@ -137,19 +137,21 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                                       " cells in its bounding box: use a larger hex size or fewer hexes");
   hooks.info("hex grid: " + std::to_string(r.cells[0]) + " x " + std::to_string(r.cells[1]) + " x " +
              std::to_string(r.cells[2]) + " cells, " + std::to_string(maps[0].h.size()) + "/" +
-             std::to_string(maps[1].h.size()) + "/" + std::to_string(maps[2].h.size()) + " planes");
+             std::to_string(maps[1].h.size()) + "/" + std::to_string(maps[2].h.size()) + " planes, " +
+             r.snapping + " snapping");
 
   // ---- cells inside the snapped polycube ------------------------------------------------
-  const geometry::TetLocator loc(X, T);
-  auto to_polycube = [&](double gx, double gy, double gz) {
-    return Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz));
+  const geometry::TetLocator loc(piecewise ? X : sn.Y, T);
+  auto query = [&](double gx, double gy, double gz) {
+    return piecewise ? loc.locate(Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz)))
+                     : loc.locate(Vec3(gx, gy, gz));
   };
   std::vector<std::array<int, 3>> cells;
   for (int i = 0; i < r.cells[0]; ++i) {
     hooks.report("hex", 0.4 * i / r.cells[0]);
     for (int j = 0; j < r.cells[1]; ++j)
       for (int k = 0; k < r.cells[2]; ++k) {
-        const geometry::TetHit hit = loc.locate(to_polycube(i + 0.5, j + 0.5, k + 0.5));
+        const geometry::TetHit hit = query(i + 0.5, j + 0.5, k + 0.5);
         if (hit.tet >= 0 && hit.min_bary >= -1e-9) cells.push_back({i, j, k});
       }
   }
@@ -174,7 +176,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   for (int v = 0; v < nv; ++v) {
     if (v % 4096 == 0) hooks.report("hex", 0.4 + 0.2 * v / nv);
     r.grid.row(v) << gv[v][0], gv[v][1], gv[v][2];
-    const geometry::TetHit hit = loc.locate(to_polycube(gv[v][0], gv[v][1], gv[v][2]));
+    const geometry::TetHit hit = query(gv[v][0], gv[v][1], gv[v][2]);
     if (hit.min_bary < -1e-6) ++r.max_locate_outside;
     Eigen::Vector4d b = hit.bary.cwiseMax(0.0);
     b /= b.sum();
@@ -208,6 +210,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   // is smooth there) they move on the surface like the other boundary vertices.
   std::vector<char> feature(nv, 0);
   for (int v = 0; v < nv; ++v) feature[v] = on_boundary[v] && (axes_mask[v] & (axes_mask[v] - 1)) != 0;
+  std::vector<Vec3> target_corners;
+  double corner_tol = 0;
   if (tree) {
     const std::vector<unsigned char> sharp = sharp_edges(*target, opt.sharp_angle_deg);
     const MatX3i adj = face_adjacency(target->F);
@@ -216,6 +220,17 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     elen /= std::max(1, r.grid_hexes);
     for (int v = 0; v < nv; ++v)
       if (feature[v] && !near_sharp_edge(*target, sharp, adj, *tree, V.row(v).transpose(), 0.05 * elen)) feature[v] = 0;
+    // Corners of the target: vertices where three or more sharp edges meet.
+    std::vector<int> sharp_count(target->V.rows(), 0);
+    for (int f = 0; f < target->F.rows(); ++f)
+      for (int k = 0; k < 3; ++k)
+        if (sharp[f] >> k & 1) {
+          ++sharp_count[target->F(f, k)];  // each edge seen from both sides: counts twice
+          ++sharp_count[target->F(f, (k + 1) % 3)];
+        }
+    for (int i = 0; i < target->V.rows(); ++i)
+      if (sharp_count[i] >= 6) target_corners.push_back(target->V.row(i).transpose());
+    corner_tol = 0.05 * elen;
   }
   std::vector<std::array<int, 2>> slide(nv, {-1, -1});
   for (int v = 0; v < nv; ++v) {
@@ -234,10 +249,14 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       feature[v] = 0;
     }
   }
-  // Polycube corners are not fixed: where the input has no corner (a polycube edge turning along a
+  // Polycube corners stay only on corners of the target: elsewhere (a polycube edge turning along a
   // straight sharp edge of the input) a fixed corner would keep a flat hex corner (block, mambo_B9).
   for (int v = 0; v < nv; ++v) {
-    if (opt.free_corners) feature[v] = 0;
+    if (feature[v] && opt.free_corners) {
+      bool on_corner = false;
+      for (const Vec3& c : target_corners) on_corner = on_corner || (c - V.row(v).transpose()).norm() <= corner_tol;
+      if (!on_corner) feature[v] = 0;
+    }
     r.sharp_vertices += feature[v] || slide[v][0] >= 0;
   }
 

@@ -1,21 +1,19 @@
 // All-hex meshing from an exact polycube (Huang et al. 2014, Section 5.2).
 //
 // 1. Planes: per axis, the distinct heights of the polycube's charts (exact after realization).
-// 2. Integer snapping: with s cells per unit length, per axis the sorted heights h_0 < ... < h_m
-//    get integers n_0 = 0, n_i = max(n_{i-1} + 1, round(s (h_i - h_0))), one by one: distinct
-//    planes never merge or swap and every slab between two planes keeps at least one cell.
-//    The snapped polycube is the image of the polycube under the per-axis piecewise-linear,
-//    strictly increasing map f_k sending h_i to n_i; its faces lie on integer planes, so it is a
-//    union of unit cells.
-// 3. Extraction: the unit cells whose centre c has f^-1(c) inside the polycube tet mesh are the
-//    hexes; each grid vertex g goes back to the input volume as f^-1(g), located in the polycube
-//    tet mesh (bucket grid) and carried to the rest mesh by its barycentric coordinates. Shared
-//    grid vertices are one vertex; hexes are ordered as in core/types.h, positive.
-// 4. Fidelity: boundary vertices are projected on the target surface (the input surface).
-// 5. Optimization: "smart" Laplacian sweeps (Freitag 1997): a vertex moves to the mean of its hex
-//    neighbours (boundary vertices: of their boundary neighbours, then back onto the surface)
-//    only when the worst scaled Jacobian of its hexes improves; vertices on polycube edges and
-//    corners stay, so that the hex mesh keeps its polycube structure.
+// 2. Integer snapping (snap.h): planes that face each other keep their order and at least one cell
+//    between them, the others may share an integer; the polycube tet mesh is deformed (harmonic
+//    displacement per axis) so that its planes lie at their integers: its faces lie on integer
+//    planes, so it is a union of unit cells. Fallbacks when that deformation inverts a tet: plain
+//    sorted snapping, then the per-axis piecewise-linear map sending the sorted heights to their
+//    integers (exact, never inverts, but stretches thin slabs).
+// 3. Extraction: the unit cells whose centre lies inside the snapped polycube tet mesh are the
+//    hexes; each grid vertex is located in that mesh (bucket grid) and carried to the input volume
+//    by its barycentric coordinates in the rest tet. Shared grid vertices are one vertex; hexes are
+//    ordered as in core/types.h, positive.
+// 4. Fidelity: boundary vertices are projected on the target surface (the input surface); vertices
+//    on polycube edges lying on a sharp edge of the target slide along the polycube edge.
+// 5. Pillowing (optional, "auto" tries both) and optimization (optimize.h).
 #pragma once
 #include <array>
 #include <string>
@@ -28,10 +26,12 @@
 namespace polycube::hex {
 
 struct HexOptions {
-  /// Approximate number of hexes; 0 = use `hex_size`.
-  int target_hexes = 0;
-  /// Hex edge length as a fraction of the bounding-box diagonal of the rest mesh (when target_hexes = 0).
-  double hex_size = 0.03;
+  /// Approximate number of grid hexes (the polycube's volume over the cell volume; pillowing adds
+  /// a boundary layer). Like the paper's Table II counts (7k-220k); used when hex_size is 0.
+  int target_hexes = 10000;
+  /// Hex edge length as a fraction of the bounding-box diagonal of the rest mesh; > 0 overrides
+  /// target_hexes.
+  double hex_size = 0;
   /// Project boundary vertices on the target surface (when one is given).
   bool project = true;
   /// Smoothing sweeps (0 = off). Each sweep visits every movable vertex once.
@@ -44,8 +44,8 @@ struct HexOptions {
   /// Dihedral angle (degrees) above which an edge of the target surface is a sharp feature: hex
   /// vertices on polycube edges that lie on one slide along it, the others move freely on the surface.
   double sharp_angle_deg = 30;
-  /// Polycube corners move on the surface like other boundary vertices (else those on sharp input
-  /// features stay where the map put them).
+  /// Polycube corners move on the surface like other boundary vertices unless they lie on a corner
+  /// of the target (3+ sharp edges); false: every polycube corner on a sharp feature stays.
   bool free_corners = true;
   /// Pillow layer thickness: each boundary vertex's inner copy starts this fraction of the way to
   /// the mean centroid of its hexes.
@@ -59,7 +59,9 @@ struct HexResult {
   double cells_per_unit = 0;      ///< s: unit cells per length unit of the polycube
   std::array<int, 3> cells{};     ///< grid extent per axis (n_m)
   std::array<std::vector<double>, 3> heights;  ///< distinct plane heights per axis (polycube units)
-  std::array<std::vector<int>, 3> snapped;     ///< their integers
+  std::array<std::vector<int>, 3> snapped;     ///< their integers (lowest 0)
+  std::string snapping;           ///< "constrained", "sorted" or "piecewise_linear" (see snap.h)
+  int shared_planes = 0;          ///< planes sharing their integer height with another (constrained snapping)
   int grid_hexes = 0;             ///< hexes of the grid (before pillowing)
   int pillow_hexes = 0;           ///< hexes of the boundary layer (0: not pillowed)
   int sharp_vertices = 0;         ///< grid vertices kept on sharp features of the target (fixed or sliding)
@@ -82,7 +84,5 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                                  const std::vector<int>& labels, const SurfaceMesh* target, const HexOptions& opt = {},
                                  const Hooks& hooks = {});
 
-/// The snapping of step 2 for one axis: sorted distinct heights -> integers (n_0 = 0).
-std::vector<int> snap_heights(const std::vector<double>& heights, double cells_per_unit);
 
 }  // namespace polycube::hex

@@ -487,7 +487,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["vertices"] = hr.V.rows();
         hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
-                      {"hexes", hr.grid_hexes}};
+                      {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["sharp_vertices"] = hr.sharp_vertices;
         hj["variants"] = json::array();

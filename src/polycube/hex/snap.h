@@ -1,0 +1,43 @@
+// Integer snapping of the polycube planes (Huang et al. 2014, Section 5.2), with order constraints.
+//
+// Per axis k, a plane is a distinct height of the charts normal to k. Two planes "face each other"
+// when a line along k meets one and then the other with no plane between (through the volume, or
+// across a gap outside it): such a pair must keep its order with at least one cell between, or the
+// volume (or the gap) would collapse. Planes that never face each other (the tops of two separate
+// bumps) may share an integer height; forcing them apart, as a plain sort does, leaves slabs a
+// fraction of a cell thick (two_spheres: planes 3e-4 apart) and folded hexes.
+// The planes bounding one chart of another axis (a step, a side face) face each other too.
+// Snapping: planes in increasing height, n_i = max(round(s (h_i - h_min)), n_p + 1 over the planes p
+// that face i from below). Then the polycube is deformed so that every plane sits at its integer:
+// per axis, a displacement, fixed on the plane's vertices and harmonic (P1 Laplacian of the polycube
+// tet mesh) elsewhere, small because snapping moves planes by about half a cell at most.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::hex {
+
+/// Plain sorted snapping: n_0 = 0, n_i = max(n_{i-1} + 1, round(s (h_i - h_0))).
+std::vector<int> snap_heights(const std::vector<double>& heights, double cells_per_unit);
+/// Snapping with order constraints: above[i] lists the planes that must be at least one cell
+/// above plane i (each higher than i). heights sorted increasing.
+std::vector<int> snap_heights(const std::vector<double>& heights, double cells_per_unit,
+                              const std::vector<std::vector<int>>& above);
+
+struct Snapping {
+  std::array<std::vector<double>, 3> heights;  ///< distinct plane heights per axis, increasing
+  std::array<std::vector<int>, 3> snapped;     ///< their integers (lowest 0)
+  std::array<int, 3> shared{};                 ///< planes sharing their integer with another plane, per axis
+  MatX3d Y;                                    ///< polycube vertices in grid units: planes at their integers
+  int inverted = 0;                            ///< tets of Y with non-positive volume
+  double inverted_volume = 0;                  ///< their total |volume|, in cells
+};
+
+/// X/T: the exact polycube tet mesh; B/labels: its boundary triangles and chart labels;
+/// constrained = false: plain sorted snapping (every plane a cell above the previous one).
+Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
+                       double cells_per_unit, bool constrained = true);
+
+}  // namespace polycube::hex
