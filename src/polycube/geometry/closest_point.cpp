@@ -68,7 +68,7 @@ int TriangleTree::build(int begin, int end) {
   return id;
 }
 
-ClosestHit TriangleTree::closest(const Vec3& p) const {
+ClosestHit TriangleTree::closest(const Vec3& p, const Vec3* facing, const std::vector<int>* group, int group_id) const {
   ClosestHit best;
   best.dist2 = std::numeric_limits<double>::infinity();
   if (nodes_.empty()) return best;
@@ -81,6 +81,8 @@ ClosestHit TriangleTree::closest(const Vec3& p) const {
       for (int i = n.begin; i < n.end; ++i) {
         const int f = order_[i];
         const Vec3 a = V_.row(F_(f, 0)), b = V_.row(F_(f, 1)), c = V_.row(F_(f, 2));
+        if (facing && !((b - a).cross(c - a).dot(*facing) > 0)) continue;
+        if (group && (*group)[f] != group_id) continue;
         const Vec3 w = closest_point_barycentric(p, a, b, c);
         const Vec3 q = w[0] * a + w[1] * b + w[2] * c;
         const double d2 = (q - p).squaredNorm();
@@ -98,6 +100,8 @@ ClosestHit TriangleTree::closest(const Vec3& p) const {
       stack.push_back(n.right);
     }
   }
+  if (group && best.face < 0) return closest(p, facing);  // no triangle of that group
+  if (facing && best.face < 0) return closest(p);         // no triangle faces that way
   return best;
 }
 

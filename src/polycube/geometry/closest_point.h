@@ -12,8 +12,8 @@ Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, cons
 
 struct ClosestHit {
   int face = -1;       ///< triangle id
-  Vec3 bary;           ///< barycentric coordinates of the closest point in that triangle
-  Vec3 point;          ///< the closest point
+  Vec3 bary = Vec3::Zero();   ///< barycentric coordinates of the closest point in that triangle
+  Vec3 point = Vec3::Zero();  ///< the closest point
   double dist2 = 0;    ///< squared distance
 };
 
@@ -21,8 +21,12 @@ struct ClosestHit {
 class TriangleTree {
  public:
   TriangleTree(const MatX3d& V, const MatX3i& F);
-  /// Closest point of the mesh to p (exact, branch and bound).
-  ClosestHit closest(const Vec3& p) const;
+  /// Closest point of the mesh to p (exact, branch and bound). With `facing`, only among the
+  /// triangles whose normal has a positive dot product with it (all of them if none has): in a
+  /// thin wall, a point of one side must not be projected on the other side. With `group`, only
+  /// among the triangles f with (*group)[f] == group_id (e.g. one smooth patch between sharp edges).
+  ClosestHit closest(const Vec3& p, const Vec3* facing = nullptr, const std::vector<int>* group = nullptr,
+                     int group_id = -1) const;
 
  private:
   struct Node {

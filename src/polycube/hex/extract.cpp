@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <thread>
 #include <unordered_map>
 
 #include "polycube/core/error.h"
@@ -212,6 +213,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   for (int v = 0; v < nv; ++v) feature[v] = on_boundary[v] && (axes_mask[v] & (axes_mask[v] - 1)) != 0;
   std::vector<Vec3> target_corners;
   double corner_tol = 0;
+  std::vector<int> patch;  // per target triangle
   if (tree) {
     const std::vector<unsigned char> sharp = sharp_edges(*target, opt.sharp_angle_deg);
     const MatX3i adj = face_adjacency(target->F);
@@ -231,6 +233,13 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     for (int i = 0; i < target->V.rows(); ++i)
       if (sharp_count[i] >= 6) target_corners.push_back(target->V.row(i).transpose());
     corner_tol = 0.05 * elen;
+    // Smooth patches: triangles connected across non-sharp edges.
+    UnionFind uf(target->F.rows());
+    for (int f = 0; f < target->F.rows(); ++f)
+      for (int k = 0; k < 3; ++k)
+        if (!(sharp[f] >> k & 1) && adj(f, k) >= 0) uf.unite(f, adj(f, k));
+    patch.resize(target->F.rows());
+    for (int f = 0; f < target->F.rows(); ++f) patch[f] = uf.find(f);
   }
   std::vector<std::array<int, 2>> slide(nv, {-1, -1});
   for (int v = 0; v < nv; ++v) {
@@ -269,7 +278,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     std::vector<char> fixed;
     std::vector<std::array<int, 2>> slide;
   };
-  auto finish = [&](bool pillow) {
+  // Runs on its own thread when both variants are tried: reports progress only when `report`.
+  auto finish = [&](bool pillow, bool report) {
     Candidate c;
     c.V = V;
     c.H = H;
@@ -313,22 +323,34 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       sl.resize(next, {-1, -1});
     }
     c.extracted = hex_quality(c.V, c.H);
-    const OptimizeStats os = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), opt.smooth_iterations, hooks);
+    Hooks quiet;
+    const OptimizeStats os = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), patch.empty() ? nullptr : &patch,
+                                            opt.smooth_iterations, opt.optimize_below,
+                                            report ? hooks : quiet);
     c.moves = os.laplacian_moves + os.optimized_moves;
     c.quality = hex_quality(c.V, c.H);
     c.fixed = fixed;
     c.slide = sl;
-    hooks.debug(std::string(pillow ? "with" : "without") + " pillowing: scaled Jacobian min " +
-                std::to_string(c.quality.sj_min) + ", mean " + std::to_string(c.quality.sj_mean));
     return c;
   };
   std::vector<bool> tries;
   if (opt.pillow != "on") tries.push_back(false);
   if (opt.pillow != "off") tries.push_back(true);
+  // Both cores: the two variants are independent.
+  std::vector<Candidate> cands(tries.size());
+  {
+    std::vector<std::thread> th;
+    for (size_t i = 1; i < tries.size(); ++i) th.emplace_back([&, i] { cands[i] = finish(tries[i], false); });
+    cands[0] = finish(tries[0], true);
+    for (auto& t : th) t.join();
+  }
   Candidate best;
   bool have = false;
-  for (bool p : tries) {
-    Candidate c = finish(p);
+  for (size_t i = 0; i < tries.size(); ++i) {
+    const bool p = tries[i];
+    Candidate& c = cands[i];
+    hooks.debug(std::string(p ? "with" : "without") + " pillowing: scaled Jacobian min " +
+                std::to_string(c.quality.sj_min) + ", mean " + std::to_string(c.quality.sj_mean));
     r.tried.push_back({p ? "pillow" : "no_pillow", c.quality.sj_min, c.quality.sj_mean});
     // Better: higher worst scaled Jacobian (beyond round-off), then higher mean.
     if (!have || c.quality.sj_min > best.quality.sj_min + 1e-3 ||

@@ -36,6 +36,10 @@ struct HexOptions {
   bool project = true;
   /// Smoothing sweeps (0 = off). Each sweep visits every movable vertex once.
   int smooth_iterations = 30;
+  /// The local optimization visits vertices whose worst hex is below this scaled Jacobian: 0.5
+  /// only lifts the worst; 0.9 also raises the mean (mambo_B9 at 10k hexes: min 0.50 -> 0.56, mean
+  /// 0.905 -> 0.94; block: 0.50 -> 0.58, 0.923 -> 0.935), at about twice the time.
+  double optimize_below = 0.9;
   /// One layer of hexes along the boundary (pillowing): every boundary quad gets a hex between it
   /// and an inner copy, so that no hex has two faces on a smooth part of the surface (on a sphere
   /// min scaled Jacobian 0.18 -> 0.53), but hexes along sharp 90-degree edges lose (box: 1 -> 0.7).

@@ -24,7 +24,8 @@ void sort_unique(std::vector<std::vector<int>>& lists) {
 
 OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
                              const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
-                             int sweeps, const Hooks& hooks) {
+                             const std::vector<int>* surface_patch, int sweeps, double optimize_below,
+                             const Hooks& hooks) {
   OptimizeStats st;
   const int n = static_cast<int>(V.rows());
   std::vector<std::vector<int>> vh(n), nb(n), bnb(n), vq(n);
@@ -64,6 +65,20 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
     }
     return sum;
   };
+  // Patch of every boundary vertex: that of its closest surface triangle at the start.
+  std::vector<int> patch(n, -1);
+  if (surface && surface_patch)
+    for (int v = 0; v < n; ++v)
+      if (boundary[v]) patch[v] = (*surface_patch)[surface->closest(V.row(v).transpose()).face];
+  // Outward normal of boundary vertex v: sum of its boundary quads' vector areas.
+  auto vertex_normal = [&](int v) {
+    Vec3 nrm = Vec3::Zero();
+    for (int q : vq[v]) {
+      const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), c = V.row(Q(q, 2)), d = V.row(Q(q, 3));
+      nrm += (c - a).cross(d - b);
+    }
+    return nrm;
+  };
   // Feature curves: the polyline through the positions at the call.
   const MatX3d V0 = V;
   auto on_curve = [&](int v) {
@@ -85,7 +100,9 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       }
       p = best;
     }
-    return boundary[v] ? surface->closest(p).point : p;
+    if (!boundary[v]) return p;
+    const Vec3 n = vertex_normal(v);
+    return surface->closest(p, &n, surface_patch, patch[v]).point;
   };
 
   for (int sweep = 0; sweep < sweeps; ++sweep) {
@@ -122,7 +139,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       const Vec3 x = V.row(v).transpose();
       double m0;
       const double f0 = eval(v, x, m0);
-      if (m0 >= 0.5) continue;
+      if (m0 >= optimize_below) continue;
       double len = 0;
       for (int u : nb[v]) len += (V.row(u).transpose() - x).norm();
       len /= std::max<size_t>(1, nb[v].size());
@@ -137,11 +154,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
         g[k] = (eval(v, a, w) - eval(v, b, w)) / (2 * h);
       }
       if (boundary[v]) {
-        Vec3 nrm = Vec3::Zero();
-        for (int q : vq[v]) {
-          const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), c = V.row(Q(q, 2)), d = V.row(Q(q, 3));
-          nrm += (c - a).cross(d - b);
-        }
+        Vec3 nrm = vertex_normal(v);
         if (nrm.norm() > 0) nrm.normalize();
         g -= g.dot(nrm) * nrm;
       }
