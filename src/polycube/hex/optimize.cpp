@@ -12,6 +12,8 @@ namespace {
 constexpr int kEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
                                {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 constexpr double kSoftMin = 10;  // sharpness of the soft minimum sum exp(-k sj)
+// Vertices of hexes below this scaled Jacobian may leave their patch (block: min 0.12 -> 0.58).
+constexpr double kCrossPatchBelow = 0.3;
 
 void sort_unique(std::vector<std::vector<int>>& lists) {
   for (auto& l : lists) {
@@ -84,7 +86,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   auto on_curve = [&](int v) {
     return v < static_cast<int>(slide.size()) && slide[v][0] >= 0 && slide[v][1] >= 0;
   };
-  auto place = [&](int v, Vec3 p) {
+  auto place = [&](int v, Vec3 p, bool any_patch = false) {
     if (on_curve(v)) {
       const Vec3 x0 = V0.row(v).transpose();
       Vec3 best = x0;
@@ -102,6 +104,11 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
     }
     if (!boundary[v]) return p;
     const Vec3 n = vertex_normal(v);
+    if (any_patch) {
+      const geometry::ClosestHit hit = surface->closest(p, &n);
+      if (surface_patch) patch[v] = (*surface_patch)[hit.face];
+      return hit.point;
+    }
     return surface->closest(p, &n, surface_patch, patch[v]).point;
   };
 
@@ -162,7 +169,9 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       const Vec3 d = -g.normalized();
       double step = 0.3 * len;
       for (int tries = 0; tries < 10; ++tries, step *= 0.5) {
-        const Vec3 p = place(v, x + step * d);
+        // A vertex of a poor hex may cross a sharp edge of the surface (to another patch) when
+        // the polycube does not put a hex edge there.
+        const Vec3 p = place(v, x + step * d, m0 < kCrossPatchBelow);
         double m;
         const double f = eval(v, p, m);
         if (m > m0 + 1e-9 || (f < f0 && m >= m0)) {

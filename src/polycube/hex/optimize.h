@@ -26,7 +26,8 @@ struct OptimizeStats {
 /// the polyline a - v - b of the positions at the call (a feature curve, e.g. a polycube edge).
 /// surface: boundary vertices are kept on it (nullptr: they stay); surface_patch (optional, one
 /// id per surface triangle): each boundary vertex stays on the patch it starts on (patches bounded
-/// by sharp edges, so that smoothing does not cut a sharp edge). optimize_below: pass 2 visits the
+/// by sharp edges, so that smoothing does not cut a sharp edge; only vertices of hexes below 0.3
+/// may leave it, when the polycube has no hex edge along a sharp edge). optimize_below: pass 2 visits the
 /// vertices whose worst hex is below this scaled Jacobian.
 OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
                              const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
