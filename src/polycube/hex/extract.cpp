@@ -9,6 +9,7 @@
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/geometry/closest_point.h"
+#include "polycube/geometry/features.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/optimize.h"
 #include "polycube/hex/snap.h"
@@ -46,39 +47,6 @@ struct GridKeyHash {
   }
 };
 
-
-// Per triangle, bit k set when its edge k (F(f,k), F(f,k+1)) is sharp: the normals of the two
-// triangles differ by more than angle_deg.
-std::vector<unsigned char> sharp_edges(const SurfaceMesh& s, double angle_deg) {
-  const MatX3i adj = face_adjacency(s.F);
-  const double c = std::cos(angle_deg * M_PI / 180);
-  auto normal = [&](int f) {
-    const Vec3 a = s.V.row(s.F(f, 0)), b = s.V.row(s.F(f, 1)), d = s.V.row(s.F(f, 2));
-    const Vec3 n = (b - a).cross(d - a);
-    return n.norm() > 0 ? Vec3(n.normalized()) : n;
-  };
-  std::vector<unsigned char> sharp(s.F.rows(), 0);
-  for (int f = 0; f < s.F.rows(); ++f)
-    for (int k = 0; k < 3; ++k)
-      if (adj(f, k) < 0 || normal(f).dot(normal(adj(f, k))) < c) sharp[f] |= 1 << k;
-  return sharp;
-}
-
-// Whether p lies within tol of a sharp edge of the triangles around its closest point.
-bool near_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
-                     const geometry::TriangleTree& tree, const Vec3& p, double tol) {
-  const int f0 = tree.closest(p).face;
-  for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
-    if (f < 0) continue;
-    for (int k = 0; k < 3; ++k) {
-      if (!(sharp[f] >> k & 1)) continue;
-      const Vec3 a = s.V.row(s.F(f, k)), b = s.V.row(s.F(f, (k + 1) % 3)), ab = b - a;
-      const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
-      if ((a + t * ab - p).norm() <= tol) return true;
-    }
-  }
-  return false;
-}
 
 }  // namespace
 
@@ -215,13 +183,13 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   double corner_tol = 0;
   std::vector<int> patch;  // per target triangle
   if (tree) {
-    const std::vector<unsigned char> sharp = sharp_edges(*target, opt.sharp_angle_deg);
+    const std::vector<unsigned char> sharp = geometry::sharp_edges(*target, opt.sharp_angle_deg);
     const MatX3i adj = face_adjacency(target->F);
     double elen = 0;
     for (int h = 0; h < r.grid_hexes; ++h) elen += (V.row(H(h, 0)) - V.row(H(h, 6))).norm() / std::sqrt(3.0);
     elen /= std::max(1, r.grid_hexes);
     for (int v = 0; v < nv; ++v)
-      if (feature[v] && !near_sharp_edge(*target, sharp, adj, *tree, V.row(v).transpose(), 0.05 * elen)) feature[v] = 0;
+      if (feature[v] && !geometry::near_sharp_edge(*target, sharp, adj, *tree, V.row(v).transpose(), 0.05 * elen)) feature[v] = 0;
     // Corners of the target: vertices where three or more sharp edges meet.
     std::vector<int> sharp_count(target->V.rows(), 0);
     for (int f = 0; f < target->F.rows(); ++f)
@@ -233,13 +201,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     for (int i = 0; i < target->V.rows(); ++i)
       if (sharp_count[i] >= 6) target_corners.push_back(target->V.row(i).transpose());
     corner_tol = 0.05 * elen;
-    // Smooth patches: triangles connected across non-sharp edges.
-    UnionFind uf(target->F.rows());
-    for (int f = 0; f < target->F.rows(); ++f)
-      for (int k = 0; k < 3; ++k)
-        if (!(sharp[f] >> k & 1) && adj(f, k) >= 0) uf.unite(f, adj(f, k));
-    patch.resize(target->F.rows());
-    for (int f = 0; f < target->F.rows(); ++f) patch[f] = uf.find(f);
+    patch = geometry::smooth_patches(*target, sharp);
   }
   std::vector<std::array<int, 2>> slide(nv, {-1, -1});
   for (int v = 0; v < nv; ++v) {
