@@ -35,11 +35,12 @@ struct ProgressBar {
 
 // `polycube measure FILE [--ref SURFACE]`: quality of any hex mesh, as JSON on stdout.
 int measure_main(int argc, char** argv) {
-  CLI::App app{"polycube measure: scaled Jacobian (Verdict convention) of a hex mesh (.mesh, .vtk, .msh) and,\n"
-               "with --ref, the two-sided Hausdorff distance of its boundary to a reference surface.\n"
+  CLI::App app{"polycube measure: scaled Jacobian (Verdict convention) of a hex mesh, or of a quad mesh when the\n"
+               "file has no hexahedra (.mesh, .vtk, .msh), and, with --ref, the two-sided Hausdorff distance\n"
+               "of its boundary (or of the quads) to a reference surface.\n"
                "Prints JSON on stdout. Exit codes: 0 ok, 2 usage, 3 unreadable input, 4 invalid mesh."};
   MeasureOptions mo;
-  app.add_option("mesh", mo.path, "Hex mesh to measure")->required();
+  app.add_option("mesh", mo.path, "Hex or quad mesh to measure")->required();
   app.add_option("--ref", mo.reference, "Reference surface (OBJ, OFF, STL, PLY, or a volume mesh's boundary)");
   app.add_option("--samples", mo.samples, "Hausdorff sample points per surface")
       ->capture_default_str()->check(CLI::Range(0, 100000000));
@@ -83,7 +84,7 @@ int main(int argc, char** argv) {
                  "Surface edge length of the built-in examples, fraction of the bbox diagonal")
       ->capture_default_str()
       ->check(CLI::Range(1e-3, 0.5));
-  app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube, hex (later: quad)")
+  app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube, then hex or quad")
       ->capture_default_str();
   app.add_option("--edge-length", opt.tet.edge_length,
                  "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
@@ -152,6 +153,12 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  bool run_quad = false;
+  app.add_flag("--quad", run_quad, "Run through to the quad mesh of the surface (same as --until quad)");
+  app.add_option("--quads", opt.target_quads, "Quad mesh: approximate number of quads (0 = the hex grid's resolution)")
+      ->capture_default_str()->check(CLI::Range(0, 100000000));
+  app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")
+      ->capture_default_str()->check(CLI::Range(0, 10000));
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");
@@ -163,6 +170,17 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  if (run_hex && run_quad) {
+    std::fprintf(stderr, "[error] give --hex or --quad, not both\n");
+    return 2;
+  }
+  if (run_quad) {
+    if (app.count("--until") > 0 && until != "quad") {
+      std::fprintf(stderr, "[error] --quad contradicts --until %s\n", until.c_str());
+      return 2;
+    }
+    until = "quad";
+  }
   if (run_hex) {
     if (app.count("--until") > 0 && until != "hex") {
       std::fprintf(stderr, "[error] --hex contradicts --until %s\n", until.c_str());

@@ -308,6 +308,32 @@ TEST(Cli, MeasureGivesTheHexStageFigures) {
   // Not a hex mesh, or no file: clear errors.
   r = run_cli("measure " + out + "/surface.mesh");
   EXPECT_EQ(r.code, 4);
-  EXPECT_NE(r.output.find("no hexahedra"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("no hexahedra or quadrilaterals"), std::string::npos) << r.output;
   EXPECT_EQ(run_cli("measure " + out + "/nosuch.mesh").code, 3);
+}
+
+TEST(Cli, QuadMeshOfTheSphere) {
+  const std::string out = temp_dir("quad_sphere");
+  RunResult r = run_cli("--example sphere --quad -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = report(out);
+  EXPECT_EQ(j["stopped_after"], "quad");
+  const json& q = j["quad"];
+  EXPECT_EQ(q["inverted"], 0);
+  EXPECT_GT(q["sj_min"].get<double>(), 0.5) << q.dump();
+  EXPECT_GT(q["sj_mean"].get<double>(), 0.9) << q.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 0.01) << q.dump();
+  EXPECT_EQ(q["irregular_vertices"], q["corners"]);  // a sphere's polycube: valence 3 at its corners only
+  EXPECT_FALSE(fs::exists(out + "/hex.mesh"));
+  // quad.mesh / quad.vtk keep the quads; quad.obj has them as polygons (read back triangulated).
+  for (const char* f : {"/quad.mesh", "/quad.vtk"}) {
+    const MeshData m = io::read_mesh(out + f, {}, true);
+    EXPECT_EQ(m.Q.rows(), q["count"].get<int>()) << f;
+  }
+  EXPECT_EQ(io::read_mesh(out + "/quad.obj").F.rows(), 2 * q["count"].get<int>());
+  r = run_cli("measure " + out + "/quad.mesh --ref " + out + "/surface.mesh");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json m = json::parse(r.output);
+  EXPECT_NEAR(m["quad"]["sj_min"].get<double>(), q["sj_min"].get<double>(), 1e-12);
+  EXPECT_NEAR(m["quad"]["hausdorff_rel"].get<double>(), q["hausdorff_rel"].get<double>(), 1e-12);
 }

@@ -154,9 +154,10 @@ TEST(Errors, InvertedTetsInTetMesh) {
 TEST(Errors, UsageErrors) {
   EXPECT_EQ(run_cli("").code, 2);
   EXPECT_EQ(run_cli("--example nosuch -o " + temp_dir("u")).code, 2);
-  RunResult r = run_cli("--example sphere --until quad -o " + temp_dir("u"));  // quad: a later issue
+  RunResult r = run_cli("--example sphere --until hexes -o " + temp_dir("u"));
   EXPECT_EQ(r.code, 2);
-  EXPECT_NE(r.output.find("not implemented yet"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("unknown stage"), std::string::npos) << r.output;
+  EXPECT_EQ(run_cli("--example sphere --hex --quad").code, 2);
   EXPECT_EQ(run_cli("--example sphere --tet-algorithm foo").code, 2);
   EXPECT_EQ(run_cli("--bogus").code, 2);
   EXPECT_EQ(run_cli("--example sphere --hex --until deform").code, 2);

@@ -66,7 +66,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   for (int v = 0; v < rest.rows(); ++v) rest_box.extend(rest.row(v).transpose());
   const double diag = rest_box.diagonal().norm();
   double s = 0;
-  if (opt.hex_size > 0) {
+  if (opt.cells_per_unit > 0) {
+    s = opt.cells_per_unit;
+  } else if (opt.hex_size > 0) {
     s = 1 / (opt.hex_size * diag);
   } else {
     if (opt.target_hexes <= 0) throw Error(ErrorKind::Usage, "give a positive hex count or hex size");

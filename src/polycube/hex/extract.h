@@ -32,6 +32,8 @@ struct HexOptions {
   /// Hex edge length as a fraction of the bounding-box diagonal of the rest mesh; > 0 overrides
   /// target_hexes.
   double hex_size = 0;
+  /// Cells per length unit of the polycube; > 0 overrides both (the quad stage sets it from a quad count).
+  double cells_per_unit = 0;
   /// Project boundary vertices on the target surface (when one is given).
   bool project = true;
   /// Smoothing sweeps (0 = off). Each sweep visits every movable vertex once.

@@ -25,7 +25,7 @@ bool is_supported(const std::string& path) {
   return false;
 }
 
-MeshData read_mesh(const std::string& path, const CadOptions& cad) {
+MeshData read_mesh(const std::string& path, const CadOptions& cad, bool keep_quads) {
   const std::string e = extension(path);
   MeshData m;
   if (e == "obj") m = read_obj(path);
@@ -39,7 +39,7 @@ MeshData read_mesh(const std::string& path, const CadOptions& cad) {
   else
     throw Error(ErrorKind::Usage, path + ": unknown file extension '" + e + "' (supported: " + kFormats + ")");
   // A surface given as quads (no volume elements): its quads are surface polygons.
-  if (!m.is_volume() && m.Q.rows() > 0) {
+  if (!keep_quads && !m.is_volume() && m.Q.rows() > 0) {
     Builder b;
     for (int i = 0; i < m.V.rows(); ++i) b.add_vertex(m.V(i, 0), m.V(i, 1), m.V(i, 2), i < (int)m.vertex_line.size() ? m.vertex_line[i] : 0);
     for (int i = 0; i < m.F.rows(); ++i) b.add_triangle(m.F(i, 0), m.F(i, 1), m.F(i, 2), m.face_source[i], m.face_line[i]);
@@ -52,7 +52,7 @@ MeshData read_mesh(const std::string& path, const CadOptions& cad) {
     m.format = f;
   }
   if (m.V.rows() == 0) throw Error(ErrorKind::Parse, path + ": file contains no vertices");
-  if (m.F.rows() == 0 && !m.is_volume())
+  if (m.F.rows() == 0 && m.Q.rows() == 0 && !m.is_volume())
     throw Error(ErrorKind::Parse, path + ": file contains no faces or cells (" + std::to_string(m.V.rows()) + " vertices only)");
   return m;
 }

@@ -30,6 +30,8 @@ std::string extension(const std::string& path);
 /// True if read_mesh knows the extension.
 bool is_supported(const std::string& path);
 /// Reads any supported format, chosen by extension.
-MeshData read_mesh(const std::string& path, const CadOptions& cad = {});
+/// keep_quads: quadrilaterals of a quad-only surface in a volume format (MEDIT, VTK, msh) stay in
+/// Q (by default they are triangulated into F, as the pipeline wants a triangle surface).
+MeshData read_mesh(const std::string& path, const CadOptions& cad = {}, bool keep_quads = false);
 
 }  // namespace polycube::io

@@ -164,6 +164,14 @@ void write_obj(const std::string& path, const MatX3d& V, const MatX3i& F) {
   f.close();
 }
 
+void write_obj_quads(const std::string& path, const MatX3d& V, const MatX4i& Q) {
+  File f(path, "w");
+  for (int i = 0; i < V.rows(); ++i) std::fprintf(f.f, "v %.17g %.17g %.17g\n", V(i, 0), V(i, 1), V(i, 2));
+  for (int i = 0; i < Q.rows(); ++i)
+    std::fprintf(f.f, "f %d %d %d %d\n", Q(i, 0) + 1, Q(i, 1) + 1, Q(i, 2) + 1, Q(i, 3) + 1);
+  f.close();
+}
+
 void write_off(const std::string& path, const MatX3d& V, const MatX3i& F) {
   File f(path, "w");
   std::fprintf(f.f, "OFF\n%ld %ld 0\n", (long)V.rows(), (long)F.rows());

@@ -27,6 +27,8 @@ void write_medit(const std::string& path, const MeshData& m);
 void write_vtk(const std::string& path, const MeshData& m, bool binary = false, const CellFields& fields = {},
                const CellVectors& vectors = {}, const CellScalars& scalars = {});
 void write_obj(const std::string& path, const MatX3d& V, const MatX3i& F);
+/// OBJ with quad faces ("f a b c d").
+void write_obj_quads(const std::string& path, const MatX3d& V, const MatX4i& Q);
 void write_off(const std::string& path, const MatX3d& V, const MatX3i& F);
 void write_stl(const std::string& path, const MatX3d& V, const MatX3i& F, bool binary);
 enum class PlyEncoding { Ascii, BinaryLittleEndian, BinaryBigEndian };

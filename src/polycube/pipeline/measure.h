@@ -1,5 +1,5 @@
-// `polycube measure`: the quality figures of any hex mesh (ours or another tool's), measured the
-// same way as the hex stage does: Verdict scaled Jacobian, and with a reference surface the
+// `polycube measure`: the quality figures of any hex mesh, or of a quad mesh when the file has no
+// hexahedra (ours or another tool's), measured the same way as the hex and quad stages do: Verdict scaled Jacobian, and with a reference surface the
 // sampled two-sided Hausdorff distance, absolute and relative to the reference's bbox diagonal.
 #pragma once
 #include <nlohmann/json.hpp>
@@ -10,13 +10,14 @@
 namespace polycube {
 
 struct MeasureOptions {
-  std::string path;       ///< hex mesh: MEDIT .mesh, VTK, Gmsh .msh
+  std::string path;       ///< hex or quad mesh: MEDIT .mesh, VTK, Gmsh .msh
   std::string reference;  ///< optional surface (any input format; a volume mesh gives its boundary)
   int samples = 200000;   ///< Hausdorff samples per surface
 };
 
 /// {"input", "hex": {count, sj_min, sj_mean, sj_max, inverted, below_0_2, below_0_5, sj_histogram,
-/// hausdorff, hausdorff_rel, ...}}. Throws Error(InvalidMesh) when the file has no hexahedra.
+/// hausdorff, hausdorff_rel, ...}} (or "quad": {...} for a quad mesh). Throws Error(InvalidMesh) when
+/// the file has neither hexahedra nor quadrilaterals.
 nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks = {});
 
 }  // namespace polycube

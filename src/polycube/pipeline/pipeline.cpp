@@ -32,13 +32,13 @@ const char* to_string(Stage s) {
   return "?";
 }
 
-Stage last_available_stage() { return Stage::Hex; }
+Stage last_available_stage() { return Stage::Quad; }
 
 Stage parse_stage(const std::string& name) {
   for (Stage s : {Stage::Load, Stage::Tet, Stage::Deform, Stage::Polycube, Stage::Hex, Stage::Quad})
     if (name == to_string(s)) {
       if (static_cast<int>(s) > static_cast<int>(last_available_stage()))
-        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet (available: load, tet, deform, polycube, hex)");
+        throw Error(ErrorKind::Usage, std::string("stage '") + name + "' is not implemented yet");
       return s;
     }
   throw Error(ErrorKind::Usage, "unknown stage '" + name + "' (stages: load, tet, deform, polycube, hex, quad)");
@@ -48,7 +48,7 @@ const std::vector<std::string>& output_files() {
   static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk",
                                              "deformed.mesh", "deformed.vtk", "labels.txt", "polycube.mesh",
                                              "polycube.vtk", "polycube_surface.obj", "map.obj", "hex.mesh",
-                                             "hex.vtk"};
+                                             "hex.vtk", "quad.obj", "quad.mesh", "quad.vtk"};
   return f;
 }
 
@@ -450,7 +450,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       hooks.report("polycube", 1);
 
       // ---- hex --------------------------------------------------------------------------
-      if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Hex)) {
+      if (opt.until == Stage::Hex) {
         Stopwatch sh;
         hooks.report("hex", 0);
         hooks.info("extracting hexes");
@@ -505,6 +505,61 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                    std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
                    ", Hausdorff " + std::to_string(hd.max / diag) + " of the bbox diagonal");
         hooks.report("hex", 1);
+      }
+
+      // ---- quad -------------------------------------------------------------------------
+      if (opt.until == Stage::Quad) {
+        Stopwatch sq;
+        hooks.report("quad", 0);
+        hooks.info("extracting the quad mesh of the surface");
+        hex::HexOptions ho = opt.hex;
+        ho.pillow = "off";
+        ho.smooth_iterations = 0;
+        if (opt.target_quads > 0) {
+          double area = 0;
+          for (int f = 0; f < B.rows(); ++f)
+            area += 0.5 * (rr.X.row(B(f, 1)) - rr.X.row(B(f, 0))).cross(rr.X.row(B(f, 2)) - rr.X.row(B(f, 0))).norm();
+          ho.cells_per_unit = std::sqrt(opt.target_quads / area);
+        }
+        const hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
+        const quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+        if (qr.quality.inverted > 0)
+          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
+                                               " quads are folded or degenerate after smoothing (min scaled Jacobian " +
+                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
+        MeshData qm;
+        qm.V = qr.V;
+        qm.Q = qr.Q;
+        io::write_medit(stage_path("quad.mesh"), qm);
+        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_quad}});
+        io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
+        const hex::Hausdorff hd = hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
+        Eigen::AlignedBox3d box;
+        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+        json hist = json::array();
+        for (int c : qr.quality.histogram) hist.push_back(c);
+        report["quad"] = {{"count", qr.quality.count},
+                          {"vertices", qr.V.rows()},
+                          {"irregular_vertices", qr.irregular_vertices},
+                          {"corners", ex.charts.corners},
+                          {"feature_vertices", qr.feature_vertices},
+                          {"sj_min", qr.quality.sj_min},
+                          {"sj_mean", qr.quality.sj_mean},
+                          {"sj_max", qr.quality.sj_max},
+                          {"inverted", qr.quality.inverted},
+                          {"below_0_5", qr.quality.below_0_5},
+                          {"sj_histogram", hist},
+                          {"hausdorff", hd.max},
+                          {"hausdorff_rel", hd.max / box.diagonal().norm()},
+                          {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
+                          {"smooth_moves", qr.smooth_moves},
+                          {"grid", {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping}}},
+                          {"seconds", sq.seconds()}};
+        report["timings"]["quad"] = sq.seconds();
+        hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
+                   std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
+                   ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " of the bbox diagonal");
+        hooks.report("quad", 1);
       }
     }
 

@@ -1,5 +1,5 @@
 // The whole job: load and validate an input, tetrahedralize it, deform it into a polycube, extract
-// the exact polycube and its map, build the hex mesh (later: quad remeshing), write the outputs and report.json.
+// the exact polycube and its map, build the hex mesh or the quad mesh of the surface, write the outputs and report.json.
 //
 // Output protocol: files are written to OUTDIR/.staging and moved into OUTDIR only when every
 // stage asked for has succeeded; outputs of an earlier run are removed first. On failure OUTDIR
@@ -12,6 +12,7 @@
 #include "polycube/core/log.h"
 #include "polycube/deform/solver.h"
 #include "polycube/hex/extract.h"
+#include "polycube/quad/quad.h"
 #include "polycube/io/readers.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
@@ -40,6 +41,9 @@ struct PipelineOptions {
   deform::DeformOptions deform;
   chart::ExtractOptions polycube;
   hex::HexOptions hex;
+  /// Quad stage: approximate quad count (0 = the hex stage's resolution) and smoothing.
+  int target_quads = 0;
+  quad::QuadOptions quad;
 };
 
 /// Names of every file the pipeline may write into the output folder.

@@ -1,0 +1,152 @@
+#include "polycube/quad/quad.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "polycube/core/topology.h"
+#include "polycube/geometry/closest_point.h"
+#include "polycube/geometry/features.h"
+#include "polycube/hex/quality.h"
+
+namespace polycube::quad {
+
+double scaled_jacobian(const std::array<Vec3, 4>& p) {
+  std::array<Vec3, 4> e, nrm;
+  for (int i = 0; i < 4; ++i) e[i] = p[(i + 1) % 4] - p[i];
+  Vec3 c = Vec3::Zero();
+  for (int i = 0; i < 4; ++i) {
+    nrm[i] = e[(i + 3) % 4].cross(e[i]);  // corner i: incoming edge x outgoing edge
+    c += nrm[i];
+  }
+  if (!(c.norm() > 0)) return 0;
+  c.normalize();
+  double m = 1e300;
+  for (int i = 0; i < 4; ++i) {
+    const double l = e[(i + 3) % 4].norm() * e[i].norm();
+    m = std::min(m, l > 0 ? nrm[i].dot(c) / l : 0.0);
+  }
+  return m;
+}
+
+QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q) {
+  QuadQuality q;
+  q.count = static_cast<int>(Q.rows());
+  q.per_quad.resize(Q.rows());
+  if (Q.rows() == 0) return q;
+  q.sj_min = 1e300;
+  q.sj_max = -1e300;
+  double sum = 0;
+  for (int f = 0; f < Q.rows(); ++f) {
+    std::array<Vec3, 4> p;
+    for (int j = 0; j < 4; ++j) p[j] = V.row(Q(f, j)).transpose();
+    const double s = scaled_jacobian(p);
+    q.per_quad[f] = s;
+    q.sj_min = std::min(q.sj_min, s);
+    q.sj_max = std::max(q.sj_max, s);
+    sum += s;
+    if (s <= 0) ++q.inverted;
+    if (s < 0.5) ++q.below_0_5;
+    ++q.histogram[std::clamp(static_cast<int>(std::floor((s + 1) * 10)), 0, 19)];
+  }
+  q.sj_mean = sum / Q.rows();
+  return q;
+}
+
+QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const SurfaceMesh& target,
+                                const QuadOptions& opt, const Hooks& hooks) {
+  Stopwatch sw;
+  QuadResult r;
+  // Boundary quads, their vertices renumbered in order of first use.
+  const MatX4i BQ = hex::boundary_quads(H);
+  std::vector<int> id(HV.rows(), -1);
+  std::vector<int> back;
+  r.Q.resize(BQ.rows(), 4);
+  for (int q = 0; q < BQ.rows(); ++q)
+    for (int j = 0; j < 4; ++j) {
+      int& v = id[BQ(q, j)];
+      if (v < 0) {
+        v = static_cast<int>(back.size());
+        back.push_back(BQ(q, j));
+      }
+      r.Q(q, j) = v;
+    }
+  const int n = static_cast<int>(back.size());
+  r.V.resize(n, 3);
+  for (int v = 0; v < n; ++v) r.V.row(v) = HV.row(back[v]);
+  r.extracted = quad_quality(r.V, r.Q);
+
+  // Neighbours, valence, incident quads.
+  std::vector<std::vector<int>> nb(n), vq(n);
+  for (int q = 0; q < r.Q.rows(); ++q)
+    for (int j = 0; j < 4; ++j) {
+      vq[r.Q(q, j)].push_back(q);
+      nb[r.Q(q, j)].push_back(r.Q(q, (j + 1) % 4));
+      nb[r.Q(q, (j + 1) % 4)].push_back(r.Q(q, j));
+    }
+  for (auto& l : nb) {
+    std::sort(l.begin(), l.end());
+    l.erase(std::unique(l.begin(), l.end()), l.end());
+  }
+  for (int v = 0; v < n; ++v) r.irregular_vertices += vq[v].size() != 4;
+
+  // Features of the target: vertices on sharp edges stay; the others stay on their patch.
+  const geometry::TriangleTree tree(target.V, target.F);
+  const std::vector<unsigned char> sharp = geometry::sharp_edges(target, opt.sharp_angle_deg);
+  const std::vector<int> patch_of_face = geometry::smooth_patches(target, sharp);
+  const MatX3i adj = face_adjacency(target.F);
+  double elen = 0;
+  for (int q = 0; q < r.Q.rows(); ++q) elen += (r.V.row(r.Q(q, 0)) - r.V.row(r.Q(q, 1))).norm();
+  elen /= std::max<Eigen::Index>(1, r.Q.rows());
+  std::vector<char> fixed(n, 0);
+  std::vector<int> patch(n, -1);
+  for (int v = 0; v < n; ++v) {
+    const Vec3 p = r.V.row(v).transpose();
+    fixed[v] = geometry::near_sharp_edge(target, sharp, adj, tree, p, 0.05 * elen);
+    patch[v] = patch_of_face[tree.closest(p).face];
+    r.feature_vertices += fixed[v];
+  }
+  auto worst = [&](int v) {
+    double m = 1e300;
+    for (int q : vq[v]) {
+      std::array<Vec3, 4> p;
+      for (int j = 0; j < 4; ++j) p[j] = r.V.row(r.Q(q, j)).transpose();
+      m = std::min(m, scaled_jacobian(p));
+    }
+    return m;
+  };
+  for (int it = 0; it < opt.smooth_iterations; ++it) {
+    hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
+    int moves = 0;
+    for (int v = 0; v < n; ++v) {
+      if (fixed[v] || nb[v].empty()) continue;
+      Vec3 c = Vec3::Zero();
+      for (int u : nb[v]) c += r.V.row(u).transpose();
+      c /= static_cast<double>(nb[v].size());
+      Vec3 nrm = Vec3::Zero();
+      for (int q : vq[v]) {
+        const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
+        nrm += (cc - a).cross(d - b);
+      }
+      const Vec3 x = r.V.row(v).transpose();
+      const double before = worst(v);
+      for (double t : {1.0, 0.5, 0.25}) {
+        const Vec3 p = tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
+        r.V.row(v) = p.transpose();
+        const double after = worst(v);
+        if (after > before + 1e-9 || (after >= before && after > 0.3)) {
+          ++moves;
+          break;
+        }
+        r.V.row(v) = x.transpose();
+      }
+    }
+    r.smooth_moves += moves;
+    if (moves == 0) break;
+  }
+  r.quality = quad_quality(r.V, r.Q);
+  r.seconds = sw.seconds();
+  hooks.report("quad", 1);
+  return r;
+}
+
+}  // namespace polycube::quad

@@ -1,0 +1,50 @@
+// Quad remeshing of the input surface from the volumetric polycube map (Huang et al. 2014,
+// Section 5.3, here through the volume): the boundary quads of the integer grid inside the snapped
+// polycube (hex/extract.h, no pillow) mapped back onto the input surface form a conforming quad
+// mesh, one quad per unit square of the polycube's faces; its irregular vertices are the polycube's
+// corners. The quads are then smoothed on the surface (smart Laplacian on the quad scaled Jacobian),
+// vertices on sharp edges of the input staying put and the others on their smooth patch.
+#pragma once
+#include <array>
+#include <vector>
+
+#include "polycube/core/log.h"
+#include "polycube/core/types.h"
+
+namespace polycube::quad {
+
+/// Scaled Jacobian of a quad (Verdict's quad_scaled_jacobian): the minimum over the 4 corners of
+/// (e_prev x e_next) . n / (|e_prev| |e_next|), n the unit normal of the quad's centre. 1 for any
+/// rectangle, sin(theta) for a rhombus of angle theta, <= 0 for a folded quad, 0 for a zero edge.
+double scaled_jacobian(const std::array<Vec3, 4>& p);
+
+struct QuadQuality {
+  int count = 0;
+  double sj_min = 0, sj_mean = 0, sj_max = 0;
+  int inverted = 0;   ///< scaled Jacobian <= 0
+  int below_0_5 = 0;
+  std::array<int, 20> histogram{};  ///< 20 bins of 0.1 over [-1, 1]
+  std::vector<double> per_quad;
+};
+QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q);
+
+struct QuadOptions {
+  int smooth_iterations = 30;    ///< smoothing sweeps on the surface (0 = off)
+  double sharp_angle_deg = 30;   ///< dihedral angle above which an input edge is a sharp feature
+};
+
+struct QuadResult {
+  MatX3d V;
+  MatX4i Q;                      ///< oriented outward (counter-clockwise seen from outside)
+  int irregular_vertices = 0;    ///< vertices of valence other than 4 (the polycube's corners, mostly)
+  int feature_vertices = 0;      ///< vertices kept on sharp edges of the input
+  QuadQuality extracted, quality;
+  int smooth_moves = 0;
+  double seconds = 0;
+};
+
+/// The quad mesh of the boundary of a hex mesh (HV, H), smoothed on `target` (the input surface).
+QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const SurfaceMesh& target,
+                                const QuadOptions& opt = {}, const Hooks& hooks = {});
+
+}  // namespace polycube::quad
