@@ -102,6 +102,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     r.cells[k] = *std::max_element(sn.snapped[k].begin(), sn.snapped[k].end());
     r.shared_planes += sn.shared[k];
   }
+  r.min_slab_ratio = sn.min_slab_ratio;
   const long long bbox_cells = 1LL * r.cells[0] * r.cells[1] * r.cells[2];
   if (bbox_cells > 200000000LL)
     throw Error(ErrorKind::Usage, "the hex grid would have " + std::to_string(bbox_cells) +

@@ -68,6 +68,7 @@ struct HexResult {
   std::array<std::vector<int>, 3> snapped;     ///< their integers (lowest 0)
   std::string snapping;           ///< "constrained", "sorted" or "piecewise_linear" (see snap.h)
   int shared_planes = 0;          ///< planes sharing their integer height with another (constrained snapping)
+  double min_slab_ratio = 0;      ///< thinnest slab between planes, in cells, over the cell it got (see snap.h)
   int grid_hexes = 0;             ///< hexes of the grid (before pillowing)
   int pillow_hexes = 0;           ///< hexes of the boundary layer (0: not pillowed)
   int sharp_vertices = 0;         ///< grid vertices kept on sharp features of the target (fixed or sliding)

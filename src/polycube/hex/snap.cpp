@@ -169,6 +169,8 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
     const std::vector<int>& n = sn.snapped[k];
     for (int i = 0; i < np; ++i)
       if ((i > 0 && n[i] == n[i - 1]) || (i + 1 < np && n[i] == n[i + 1])) ++sn.shared[k];
+    for (int i = 0; i + 1 < np; ++i)
+      if (n[i + 1] != n[i]) sn.min_slab_ratio = std::min(sn.min_slab_ratio, s * (h[i + 1] - h[i]) / std::abs(n[i + 1] - n[i]));
     // Displacement d (grid units) of Y_k = s (X_k - h_0) + d: fixed on plane vertices, harmonic elsewhere.
     Eigen::VectorXd d = Eigen::VectorXd::Zero(nv);
     std::vector<int> free_id(nv, -1);

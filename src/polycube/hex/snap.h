@@ -30,6 +30,9 @@ struct Snapping {
   std::array<std::vector<double>, 3> heights;  ///< distinct plane heights per axis, increasing
   std::array<std::vector<int>, 3> snapped;     ///< their integers (lowest 0)
   std::array<int, 3> shared{};                 ///< planes sharing their integer with another plane, per axis
+  /// Thinnest slab: min over consecutive planes with different integers of s (h_j - h_i) / (n_j - n_i);
+  /// well below 1 when planes much closer than a cell had to be kept a cell apart.
+  double min_slab_ratio = 1e300;
   MatX3d Y;                                    ///< polycube vertices in grid units: planes at their integers
   int inverted = 0;                            ///< tets of Y with non-positive volume
   double inverted_volume = 0;                  ///< their total |volume|, in cells

@@ -456,11 +456,16 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.info("extracting hexes");
         const hex::HexResult hr =
             hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, opt.hex, hooks);
-        if (hr.quality.inverted > 0)
+        if (hr.quality.inverted > 0) {
+          std::string why = "; try more hexes (--hexes)";
+          if (hr.min_slab_ratio < 0.05)
+            why = "; the polycube has planes " + std::to_string(hr.min_slab_ratio) +
+                  " of a cell apart that must stay a cell apart (a step far thinner than a hex), which stretches "
+                  "the map there";
           throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
                                                " hexes are inverted or degenerate after optimization (min scaled "
-                                               "Jacobian " + std::to_string(hr.quality.sj_min) +
-                                               "); try a smaller --hex-size");
+                                               "Jacobian " + std::to_string(hr.quality.sj_min) + ")" + why);
+        }
         MeshData hm;
         hm.V = hr.V;
         hm.H = hr.H;
@@ -487,7 +492,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["vertices"] = hr.V.rows();
         hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
-                      {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes}};
+                      {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
+                      {"min_slab_ratio", hr.min_slab_ratio}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["sharp_vertices"] = hr.sharp_vertices;
         hj["variants"] = json::array();
