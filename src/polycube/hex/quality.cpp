@@ -48,28 +48,32 @@ double scaled_jacobian(const MatX3d& V, const MatX8i& H, int h) {
   return scaled_jacobian(p);
 }
 
-HexQuality hex_quality(const MatX3d& V, const MatX8i& H) {
-  HexQuality q;
-  q.count = static_cast<int>(H.rows());
-  q.per_hex.resize(H.rows());
-  if (H.rows() == 0) return q;
-  q.sj_min = 1e300;
-  q.sj_max = -1e300;
-  double sum = 0;
-  for (int h = 0; h < H.rows(); ++h) {
-    const double s = scaled_jacobian(V, H, h);
-    q.per_hex[h] = s;
-    q.sj_min = std::min(q.sj_min, s);
-    q.sj_max = std::max(q.sj_max, s);
-    sum += s;
-    if (s <= 0) ++q.inverted;
-    if (s < 0.2) ++q.below_0_2;
-    if (s < 0.5) ++q.below_0_5;
-    const int bin = std::clamp(static_cast<int>(std::floor((s + 1) * 10)), 0, 19);
-    ++q.histogram[bin];
+QualityStats quality_stats(std::vector<double> values) {
+  QualityStats q;
+  q.count = static_cast<int>(values.size());
+  if (!values.empty()) {
+    q.sj_min = 1e300;
+    q.sj_max = -1e300;
+    double sum = 0;
+    for (double s : values) {
+      q.sj_min = std::min(q.sj_min, s);
+      q.sj_max = std::max(q.sj_max, s);
+      sum += s;
+      if (s <= 0) ++q.inverted;
+      if (s < 0.2) ++q.below_0_2;
+      if (s < 0.5) ++q.below_0_5;
+      ++q.histogram[std::clamp(static_cast<int>(std::floor((s + 1) * 10)), 0, 19)];
+    }
+    q.sj_mean = sum / values.size();
   }
-  q.sj_mean = sum / H.rows();
+  q.per_element = std::move(values);
   return q;
+}
+
+HexQuality hex_quality(const MatX3d& V, const MatX8i& H) {
+  std::vector<double> s(H.rows());
+  for (int h = 0; h < H.rows(); ++h) s[h] = scaled_jacobian(V, H, h);
+  return quality_stats(std::move(s));
 }
 
 MatX4i boundary_quads(const MatX8i& H, int* nonmanifold) {

@@ -21,7 +21,8 @@ double scaled_jacobian(const MatX3d& V, const MatX8i& H, int h);
 /// The 9 values it is the minimum of: the 8 corners (in vertex order), then the centre.
 std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p);
 
-struct HexQuality {
+/// Statistics of per-element scaled Jacobians (hexes or quads).
+struct QualityStats {
   int count = 0;
   double sj_min = 0, sj_mean = 0, sj_max = 0;
   int inverted = 0;      ///< scaled Jacobian <= 0
@@ -29,8 +30,12 @@ struct HexQuality {
   int below_0_5 = 0;
   /// Histogram of the scaled Jacobian over [-1, 1] in 20 bins of 0.1 (bin 0 = [-1, -0.9)).
   std::array<int, 20> histogram{};
-  std::vector<double> per_hex;  ///< scaled Jacobian of every hex
+  std::vector<double> per_element;  ///< scaled Jacobian of every element
 };
+using HexQuality = QualityStats;
+
+/// Statistics of the given per-element values.
+QualityStats quality_stats(std::vector<double> values);
 
 HexQuality hex_quality(const MatX3d& V, const MatX8i& H);
 

@@ -470,7 +470,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hm.V = hr.V;
         hm.H = hr.H;
         io::write_medit(stage_path("hex.mesh"), hm);
-        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_hex}});
+        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_element}});
         const MatX3i hexF = hex::triangulate_quads(hex::boundary_quads(hr.H));
         const hex::Hausdorff hd = hex::hausdorff(hr.V, hexF, surface.V, surface.F);
         Eigen::AlignedBox3d box;
@@ -537,7 +537,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         qm.V = qr.V;
         qm.Q = qr.Q;
         io::write_medit(stage_path("quad.mesh"), qm);
-        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_quad}});
+        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
         io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
         const hex::Hausdorff hd = hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
         Eigen::AlignedBox3d box;

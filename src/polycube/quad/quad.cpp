@@ -29,27 +29,13 @@ double scaled_jacobian(const std::array<Vec3, 4>& p) {
 }
 
 QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q) {
-  QuadQuality q;
-  q.count = static_cast<int>(Q.rows());
-  q.per_quad.resize(Q.rows());
-  if (Q.rows() == 0) return q;
-  q.sj_min = 1e300;
-  q.sj_max = -1e300;
-  double sum = 0;
+  std::vector<double> s(Q.rows());
   for (int f = 0; f < Q.rows(); ++f) {
     std::array<Vec3, 4> p;
     for (int j = 0; j < 4; ++j) p[j] = V.row(Q(f, j)).transpose();
-    const double s = scaled_jacobian(p);
-    q.per_quad[f] = s;
-    q.sj_min = std::min(q.sj_min, s);
-    q.sj_max = std::max(q.sj_max, s);
-    sum += s;
-    if (s <= 0) ++q.inverted;
-    if (s < 0.5) ++q.below_0_5;
-    ++q.histogram[std::clamp(static_cast<int>(std::floor((s + 1) * 10)), 0, 19)];
+    s[f] = scaled_jacobian(p);
   }
-  q.sj_mean = sum / Q.rows();
-  return q;
+  return hex::quality_stats(std::move(s));
 }
 
 QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const SurfaceMesh& target,

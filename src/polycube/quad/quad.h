@@ -10,6 +10,7 @@
 
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
+#include "polycube/hex/quality.h"
 
 namespace polycube::quad {
 
@@ -18,14 +19,7 @@ namespace polycube::quad {
 /// rectangle, sin(theta) for a rhombus of angle theta, <= 0 for a folded quad, 0 for a zero edge.
 double scaled_jacobian(const std::array<Vec3, 4>& p);
 
-struct QuadQuality {
-  int count = 0;
-  double sj_min = 0, sj_mean = 0, sj_max = 0;
-  int inverted = 0;   ///< scaled Jacobian <= 0
-  int below_0_5 = 0;
-  std::array<int, 20> histogram{};  ///< 20 bins of 0.1 over [-1, 1]
-  std::vector<double> per_quad;
-};
+using QuadQuality = hex::QualityStats;
 QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q);
 
 struct QuadOptions {
