@@ -332,20 +332,22 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   r.grid.conservativeResize(V.rows(), 3);
   for (int v = nv; v < V.rows(); ++v) r.grid.row(v).setConstant(-1);
   {
+    // The three worst hexes, for -v: per-sample scaled Jacobians and what kind their vertices are.
     std::vector<std::pair<double, int>> w;
-    for (int h = 0; h < H.rows(); ++h) w.push_back({scaled_jacobian(V, H, h), h});
-    std::sort(w.begin(), w.end());
-    for (int i = 0; i < std::min<int>(3, w.size()); ++i) {
+    for (int h = 0; h < H.rows(); ++h) w.push_back({best.quality.per_element[h], h});
+    const int nw = std::min<int>(3, static_cast<int>(w.size()));
+    std::partial_sort(w.begin(), w.begin() + nw, w.end());
+    const MatX4i Qb = boundary_quads(H);
+    std::vector<char> bnd(V.rows(), 0);
+    for (int q = 0; q < Qb.rows(); ++q)
+      for (int j = 0; j < 4; ++j) bnd[Qb(q, j)] = 1;
+    for (int i = 0; i < nw; ++i) {
       std::string m = "worst hex " + std::to_string(w[i].second) + (w[i].second >= r.grid_hexes ? " (pillow)" : "") +
                       ": scaled Jacobian at its corners and centre";
       std::array<Vec3, 8> c;
       for (int j = 0; j < 8; ++j) c[j] = V.row(H(w[i].second, j)).transpose();
       for (double x : scaled_jacobian_samples(c)) m += " " + std::to_string(x).substr(0, 5);
       m += "; vertices";
-      const MatX4i Qb = boundary_quads(H);
-      std::vector<char> bnd(V.rows(), 0);
-      for (int q = 0; q < Qb.rows(); ++q)
-        for (int j = 0; j < 4; ++j) bnd[Qb(q, j)] = 1;
       for (int j = 0; j < 8; ++j) {
         const int v = H(w[i].second, j);
         m += best.fixed[v] ? " fixed" : best.slide[v][0] >= 0 ? " sliding" : bnd[v] ? " boundary" : " inner";
