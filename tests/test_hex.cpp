@@ -3,6 +3,7 @@
 #include <set>
 
 #include "polycube/chart/labeling.h"
+#include "polycube/core/error.h"
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/extract.h"
@@ -164,6 +165,29 @@ TEST(Hex, ConstrainedSnappingMergesOnlyPlanesThatDoNotFaceEachOther) {
   EXPECT_EQ(p.snapped[2], (std::vector<int>{0, 4, 5}));
   // Through the volume (x: 0 | 1, 2 | 3) planes keep their order and distance.
   EXPECT_EQ(c.snapped[0], (std::vector<int>{0, 4, 8, 12}));
+}
+
+TEST(Hex, AnOverlappingPolycubeIsRefused) {
+  // Two boxes, each a valid polycube, moved so that they overlap: every tet is positive, yet a line
+  // along z meets two bottoms in a row. Snapping counts such lines and extraction refuses.
+  const SurfaceMesh two = merge(box(Vec3(0, 0, 0), Vec3(1, 1, 1)), box(Vec3(3, 0, 0), Vec3(4, 1, 1)));
+  const TetMesh tm = tet_mesh_of(two.V, two.F, 2000);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  MatX3d X = tm.V;
+  for (int v = 0; v < X.rows(); ++v)
+    if (X(v, 0) > 2) X.row(v) += Vec3(-2.5, 0, 0.3).transpose();  // second box now [0.5,1.5]x[0,1]x[0.3,1.3]
+  const hex::Snapping sn = hex::snap_polycube(X, tm.T, tm.boundary, labels, 4, true);
+  EXPECT_GT(sn.overlap_lines[2], 0);
+  EXPECT_GT(sn.overlap_lines[0], 0);
+  const hex::Snapping ok = hex::snap_polycube(tm.V, tm.T, tm.boundary, labels, 4, true);
+  EXPECT_EQ(ok.overlap_lines, (std::array<int, 3>{0, 0, 0}));
+  try {
+    hex::hex_mesh_from_polycube(tm.V, tm.T, X, tm.boundary, labels, &two);
+    FAIL() << "an overlapping polycube was meshed";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.kind(), ErrorKind::Polycube);
+    EXPECT_NE(std::string(e.what()).find("overlaps itself"), std::string::npos) << e.what();
+  }
 }
 
 TEST(Hex, BoxGivesTheExactGrid) {

@@ -81,6 +81,14 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   // map of the sorted snapping (exact, but it stretches slabs between planes that do not interact).
   Snapping sn = snap_polycube(X, T, B, labels, s, true);
   r.snapping = "constrained";
+  {
+    const std::array<int, 3>& o = sn.overlap_lines;
+    if (o[0] + o[1] + o[2] > 0)
+      throw Error(ErrorKind::Polycube,
+                  "the polycube overlaps itself (lines along x/y/z meeting two faces of the same orientation in a "
+                  "row: " + std::to_string(o[0]) + "/" + std::to_string(o[1]) + "/" + std::to_string(o[2]) +
+                      "), although every tet is positive: a hex grid needs an embedded polycube");
+  }
   // A few inverted slivers of negligible volume (in cells) do not matter to point location.
   const double kNegligible = 0.05;
   if (sn.inverted_volume > kNegligible) {

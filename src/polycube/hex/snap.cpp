@@ -32,8 +32,11 @@ namespace {
 
 // Order constraints of the planes of axis k: lines along k through points of every chart face of
 // axis k; consecutive planes met on a line face each other.
-std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& tri_plane,
-                                            const std::vector<int>& tris, int k, int nplanes) {
+// Also counts the lines that meet two faces of the same orientation in a row (two bottoms with no
+// top between, both hit well inside): the polycube overlaps itself there.
+std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels,
+                                            const std::vector<int>& tri_plane, const std::vector<int>& tris, int k,
+                                            int nplanes, int& overlap_lines) {
   const int u = (k + 1) % 3, w = (k + 2) % 3;
   Eigen::AlignedBox2d box;
   for (int f : tris)
@@ -51,7 +54,14 @@ std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, co
       for (int c = cell(b.min()[1], 1); c <= cell(b.max()[1], 1); ++c) bucket[a * g + c].push_back(f);
   }
   std::vector<std::set<int>> above(nplanes);
-  std::vector<std::pair<double, int>> hits;
+  struct Hit {
+    double height;
+    int plane;
+    int label;
+    double depth;  // min barycentric coordinate: > 0 strictly inside the triangle
+    bool operator<(const Hit& o) const { return height < o.height || (height == o.height && plane < o.plane); }
+  };
+  std::vector<Hit> hits;
   auto shoot = [&](double pu, double pw) {
     hits.clear();
     for (int f : bucket[cell(pu, 0) * g + cell(pw, 1)]) {
@@ -62,11 +72,16 @@ std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, co
       const double l1 = ((pu - ax) * (cy - ay) - (cx - ax) * (pw - ay)) / d;
       const double l2 = ((bx - ax) * (pw - ay) - (pu - ax) * (by - ay)) / d;
       if (l1 < -1e-9 || l2 < -1e-9 || l1 + l2 > 1 + 1e-9) continue;
-      hits.push_back({X(B(f, 0), k), tri_plane[f]});
+      hits.push_back({X(B(f, 0), k), tri_plane[f], labels[f], std::min({l1, l2, 1 - l1 - l2})});
     }
     std::sort(hits.begin(), hits.end());
-    for (size_t i = 0; i + 1 < hits.size(); ++i)
-      if (hits[i].second != hits[i + 1].second) above[hits[i].second].insert(hits[i + 1].second);
+    bool overlap = false;
+    for (size_t i = 0; i + 1 < hits.size(); ++i) {
+      if (hits[i].plane == hits[i + 1].plane) continue;
+      above[hits[i].plane].insert(hits[i + 1].plane);
+      overlap = overlap || (hits[i].label == hits[i + 1].label && hits[i].depth > 1e-6 && hits[i + 1].depth > 1e-6);
+    }
+    overlap_lines += overlap;
   };
   for (int f : tris) {
     Eigen::Vector2d c(0, 0);
@@ -152,7 +167,7 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
     const int np = static_cast<int>(h.size());
     std::vector<std::vector<int>> above;
     if (constrained) {
-      above = facing_planes(X, B, tri_plane, tris, k, np);
+      above = facing_planes(X, B, labels, tri_plane, tris, k, np, sn.overlap_lines[k]);
       // The planes of axis k bounding one chart of another axis keep their order and a cell
       // between them, or that chart (a step, a side face) would lose its height.
       std::vector<std::pair<int, int>> cp;  // (chart, plane)

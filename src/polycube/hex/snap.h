@@ -33,6 +33,9 @@ struct Snapping {
   /// Thinnest slab: min over consecutive planes with different integers of s (h_j - h_i) / (n_j - n_i);
   /// well below 1 when planes much closer than a cell had to be kept a cell apart.
   double min_slab_ratio = 1e300;
+  /// Per axis, sample lines that meet two faces of the same orientation in a row (constrained
+  /// snapping only): the polycube overlaps itself, and no hex grid can represent it.
+  std::array<int, 3> overlap_lines{};
   MatX3d Y;                                    ///< polycube vertices in grid units: planes at their integers
   int inverted = 0;                            ///< tets of Y with non-positive volume
   double inverted_volume = 0;                  ///< their total |volume|, in cells
