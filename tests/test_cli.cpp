@@ -61,6 +61,7 @@ TEST_P(CliExample, RunsToAnExactPolycubeAndAValidHexMesh) {
   EXPECT_EQ(j["polycube"]["planarity_error"], 0.0);
   EXPECT_EQ(j["polycube"]["misoriented_faces"], 0);
   EXPECT_TRUE(j["polycube"]["chart_graph"]["valid"].get<bool>()) << j["polycube"]["chart_graph"].dump();
+  EXPECT_EQ(j["polycube"]["self_overlap_lines"], json::array({0, 0, 0}));
   // ... and a hex mesh with no inverted hex, close to the input, that reads back as written.
   const json& h = j["hex"];
   EXPECT_EQ(h["inverted"], 0);

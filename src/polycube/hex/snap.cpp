@@ -97,18 +97,51 @@ std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, co
   return out;
 }
 
+// The triangles of axis k, the distinct heights of their planes (increasing) and each one's plane.
+void axis_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, int k, double diag,
+                 std::vector<int>& tris, std::vector<double>& h, std::vector<int>& tri_plane) {
+  std::vector<double> hk;
+  for (int f = 0; f < B.rows(); ++f)
+    if (labels[f] / 2 == k) {
+      tris.push_back(f);
+      for (int j = 0; j < 3; ++j) hk.push_back(X(B(f, j), k));
+    }
+  std::sort(hk.begin(), hk.end());
+  const double tol = 1e-12 * std::max(diag, 1e-300);
+  h.clear();
+  for (double x : hk)
+    if (h.empty() || x - h.back() > tol) h.push_back(x);
+  if (h.size() < 2) throw Error(ErrorKind::Polycube, "the polycube has fewer than two planes along an axis");
+  tri_plane.assign(B.rows(), -1);
+  for (int f : tris)
+    tri_plane[f] = static_cast<int>(std::lower_bound(h.begin(), h.end(), X(B(f, 0), k) - tol) - h.begin());
+}
+
+double bbox_diagonal(const MatX3d& X) {
+  Eigen::AlignedBox3d box;
+  for (int v = 0; v < X.rows(); ++v) box.extend(X.row(v).transpose());
+  return box.diagonal().norm();
+}
+
 }  // namespace
+
+std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels) {
+  std::array<int, 3> o{};
+  const double diag = bbox_diagonal(X);
+  for (int k = 0; k < 3; ++k) {
+    std::vector<int> tris, tri_plane;
+    std::vector<double> h;
+    axis_planes(X, B, labels, k, diag, tris, h, tri_plane);
+    facing_planes(X, B, labels, tri_plane, tris, k, static_cast<int>(h.size()), o[k]);
+  }
+  return o;
+}
 
 Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
                        double s, bool constrained) {
   Snapping sn;
   const int nv = static_cast<int>(X.rows());
-  double diag = 0;
-  {
-    Eigen::AlignedBox3d box;
-    for (int v = 0; v < nv; ++v) box.extend(X.row(v).transpose());
-    diag = box.diagonal().norm();
-  }
+  const double diag = bbox_diagonal(X);
   // P1 Laplacian (stiffness matrix) of the polycube tet mesh.
   std::vector<Eigen::Triplet<double>> trip;
   trip.reserve(16 * T.rows());
@@ -142,28 +175,12 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
   sn.Y.resize(nv, 3);
   for (int k = 0; k < 3; ++k) {
     // Planes of axis k and the plane of each of its vertices.
-    std::vector<int> tris;
-    std::vector<double> hk;
-    for (int f = 0; f < B.rows(); ++f)
-      if (labels[f] / 2 == k) {
-        tris.push_back(f);
-        for (int j = 0; j < 3; ++j) hk.push_back(X(B(f, j), k));
-      }
-    std::sort(hk.begin(), hk.end());
-    const double tol = 1e-12 * std::max(diag, 1e-300);
+    std::vector<int> tris, tri_plane;
     std::vector<double>& h = sn.heights[k];
-    for (double x : hk)
-      if (h.empty() || x - h.back() > tol) h.push_back(x);
-    if (h.size() < 2) throw Error(ErrorKind::Polycube, "the polycube has fewer than two planes along an axis");
-    auto plane_of = [&](double x) {
-      auto it = std::lower_bound(h.begin(), h.end(), x - tol);
-      return static_cast<int>(it - h.begin());
-    };
-    std::vector<int> tri_plane(B.rows(), -1), vplane(nv, -1);
-    for (int f : tris) {
-      tri_plane[f] = plane_of(X(B(f, 0), k));
+    axis_planes(X, B, labels, k, diag, tris, h, tri_plane);
+    std::vector<int> vplane(nv, -1);
+    for (int f : tris)
       for (int j = 0; j < 3; ++j) vplane[B(f, j)] = tri_plane[f];
-    }
     const int np = static_cast<int>(h.size());
     std::vector<std::vector<int>> above;
     if (constrained) {

@@ -46,4 +46,8 @@ struct Snapping {
 Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
                        double cells_per_unit, bool constrained = true);
 
+/// Per axis, the sample lines (through every chart face, as in the snapping) that meet two faces
+/// of the same orientation in a row: > 0 when the polycube overlaps itself.
+std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels);
+
 }  // namespace polycube::hex

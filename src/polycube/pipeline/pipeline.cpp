@@ -12,6 +12,7 @@
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/closest_point.h"
 #include "polycube/hex/extract.h"
+#include "polycube/hex/snap.h"
 #include "polycube/io/writers.h"
 #include "polycube/validate/tetmesh.h"
 
@@ -368,6 +369,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
+      {
+        // Every tet positive does not make the polycube embedded: count lines meeting two faces of
+        // the same orientation in a row (the polycube overlaps itself there).
+        const std::array<int, 3> o = hex::overlap_lines(rr.X, tm.boundary, ex.labels);
+        pj["self_overlap_lines"] = {o[0], o[1], o[2]};
+        if (o[0] + o[1] + o[2] > 0)
+          hooks.warn("the polycube overlaps itself (" + std::to_string(o[0] + o[1] + o[2]) +
+                     " sample lines meet two faces of the same orientation in a row): it is not embedded");
+      }
       if (!ex.charts.valid)
         hooks.warn("the polycube is exact and has no inverted tet, but its chart graph has problems: " +
                    (ex.charts.problems.empty() ? std::string("see report.json") : ex.charts.problems.front()));
