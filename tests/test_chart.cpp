@@ -247,3 +247,49 @@ TEST(Realize, OppositeChartsSharingAPlaneFailWithAReason) {
   EXPECT_FALSE(r.success);
   EXPECT_NE(r.failure.find("zero thickness"), std::string::npos) << r.failure;
 }
+
+TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
+  // The relaxation of Eq. 17 inverts tets around the hole; plain ARAP steps left one inverted
+  // there, the elliptic untangling (Garanzha et al. 2021) removes them all.
+  MeshData m = examples::make("box_hole", 0.04);
+  TetMesh tm = tet_mesh_of(m.V, m.F);
+  auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  chart::ExtractOptions opt;
+  opt.realize.start = "eq17";
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.realized.start, "eq17");
+  // More steps than the plain ARAP untangling may take: the elliptic untangling ran.
+  EXPECT_GT(e.realized.untangle_iterations, opt.realize.untangle_iterations);
+}
+
+TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {
+  // A flat 6 x 6 grid labelled +Z, except the strip of triangles between rows 2 and 3, labelled
+  // +X, which the "deformation" squeezes to zero width (row 3 moved onto row 2): its labels come
+  // from the reliable neighbours, +Z.
+  const int n = 6;
+  MatX3d rest((n + 1) * (n + 1), 3);
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) rest.row(j * (n + 1) + i) = Vec3(i, j, 0).transpose();
+  MatX3i F(2 * n * n, 3);
+  std::vector<int> labels(F.rows(), 4);
+  for (int j = 0, f = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = j * (n + 1) + i, b = a + 1, c = a + n + 2, d = a + n + 1;
+      F.row(f) = Eigen::RowVector3i(a, b, c);
+      if (j == 2) labels[f] = 0;
+      ++f;
+      F.row(f) = Eigen::RowVector3i(a, c, d);
+      if (j == 2) labels[f] = 0;
+      ++f;
+    }
+  MatX3d deformed = rest;
+  for (int i = 0; i <= n; ++i) deformed(3 * (n + 1) + i, 1) = 2.0 + 1e-6;
+  std::vector<int> l = labels;
+  EXPECT_EQ(chart::relabel_collapsed(rest, deformed, F, l), 2 * n);
+  for (int f = 0; f < F.rows(); ++f) EXPECT_EQ(l[f], 4) << "triangle " << f;
+  // Without collapse nothing changes.
+  l = labels;
+  EXPECT_EQ(chart::relabel_collapsed(rest, rest, F, l), 0);
+  EXPECT_EQ(l, labels);
+}

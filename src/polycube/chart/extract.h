@@ -10,6 +10,9 @@
 namespace polycube::chart {
 
 struct ExtractOptions {
+  /// Triangles whose deformed area is below this fraction of the median deformed/rest area ratio
+  /// take their neighbours' label before cleanup (relabel_collapsed); 0 = off.
+  double collapsed_ratio = 1e-3;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };

@@ -155,6 +155,50 @@ int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vecto
 
 }  // namespace
 
+int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& F, std::vector<int>& labels,
+                      double ratio) {
+  const int nf = static_cast<int>(F.rows());
+  if (nf == 0 || !(ratio > 0)) return 0;
+  auto area = [&](const MatX3d& X, int f) {
+    const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), c = X.row(F(f, 2));
+    return 0.5 * (b - a).cross(c - a).norm();
+  };
+  std::vector<double> r(nf);
+  for (int f = 0; f < nf; ++f) r[f] = area(deformed, f) / std::max(area(rest, f), 1e-300);
+  std::vector<double> sorted = r;
+  std::nth_element(sorted.begin(), sorted.begin() + nf / 2, sorted.end());
+  const double threshold = ratio * sorted[nf / 2];
+  std::vector<char> unreliable(nf, 0);
+  int count = 0;
+  for (int f = 0; f < nf; ++f)
+    if (r[f] < threshold) unreliable[f] = 1, ++count;
+  if (count == 0) return 0;
+  const MatX3i N = face_adjacency(F);
+  int changed = 0;
+  // Fronts: each pass labels the unreliable triangles that touch a reliable one.
+  for (int left = count; left > 0;) {
+    std::vector<std::pair<int, int>> set;
+    for (int f = 0; f < nf; ++f) {
+      if (!unreliable[f]) continue;
+      int votes[6] = {0, 0, 0, 0, 0, 0};
+      for (int k = 0; k < 3; ++k) {
+        const int g = N(f, k);
+        if (g >= 0 && !unreliable[g]) votes[labels[g]]++;
+      }
+      const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
+      if (votes[best] > 0) set.emplace_back(f, best);
+    }
+    if (set.empty()) break;  // a component with no reliable triangle keeps its labels
+    for (auto [f, l] : set) {
+      changed += labels[f] != l;
+      labels[f] = l;
+      unreliable[f] = 0;
+    }
+    left -= static_cast<int>(set.size());
+  }
+  return changed;
+}
+
 CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels, const CleanupOptions& opt) {
   CleanupStats s;
   const std::vector<int> initial = labels;

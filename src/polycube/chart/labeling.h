@@ -68,8 +68,18 @@ struct CleanupStats {
   int degree1 = 0, degree2 = 0, degree3 = 0;  ///< charts removed, by degree
   int opposite = 0;    ///< charts relabelled because they met a chart of the opposite label
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
+  int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
   int rounds = 0;
 };
+
+/// Labels of collapsed triangles: a boundary triangle whose deformed area is below
+/// `ratio` x (median deformed/rest area ratio) has no reliable normal (the deformation squeezed it
+/// into a seam, e.g. a fillet of fandisk pressed flat between two charts), and its label by normal
+/// can open a sliver of a third chart along the seam that no polycube realizes. Such triangles take
+/// the most frequent label of their reliable edge neighbours, propagated inwards. Returns the
+/// triangles relabelled.
+int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& F, std::vector<int>& labels,
+                      double ratio = 1e-3);
 
 /// Cleans `labels` (one per triangle of F) in place. X: positions used for border lengths.
 CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels,

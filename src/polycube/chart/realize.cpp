@@ -222,6 +222,171 @@ class Realizer {
     return it;
   }
 
+  // The first inverted tets of X, named with the planes of their vertices, e.g. "tet 7 (3:X-- 9:--Z
+  // ...)"; count receives how many are inverted.
+  std::string inverted_tets(const MatX3d& X, int* count, int show = 3) const {
+    std::string who;
+    *count = 0;
+    for (int t = 0; t < T_.rows(); ++t)
+      if (!(volume_ratio(X, T_, arap_rest_, t) > 0) && (*count)++ < show) {
+        who += (who.empty() ? "" : "; ") + std::string("tet ") + std::to_string(t) + " (";
+        for (int j = 0; j < 4; ++j) {
+          const int v = T_(t, j);
+          who += (j ? " " : "") + std::to_string(v) + ":";
+          for (int k = 0; k < 3; ++k) who += planes_.of_vertex[k][v] >= 0 ? "XYZ"[k] : '-';
+        }
+        who += ")";
+      }
+    return who;
+  }
+
+  // Untangling by the regularized elliptic energy of Garanzha et al. ("Foldover-free maps in 50
+  // lines of code", 2021), over the reduced unknowns (planes stay exact, heights free):
+  //   sum_t w_t [(1 - theta) tr(J^T J) / chi(det J)^(2/3) + theta (det J^2 + 1) / chi(det J)],
+  //   chi(D) = (D + sqrt(eps^2 + D^2)) / 2,
+  // J the rest -> X Jacobian scaled to unit mean volume ratio. The energy is finite for inverted
+  // tets and, as eps falls, penalizes them without bound; each eps is minimized by L-BFGS
+  // preconditioned with the ARAP matrix (the factorizations at hand), then eps is updated by the
+  // paper's rule. Stops once no tet is inverted. Returns the L-BFGS iterations taken.
+  int untangle_elliptic(MatX3d& X, int& inverted, int max_rounds = 30, int max_inner = 300) const {
+    const int n = static_cast<int>(rest_.rows());
+    const int nt = static_cast<int>(T_.rows());
+    int off[4] = {0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + red_.nvar[k];
+    const int N = off[3];
+    auto to_z = [&](const MatX3d& Y) {
+      Eigen::VectorXd z = Eigen::VectorXd::Zero(N);
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v) z[off[k] + red_.var[k][v]] = Y(v, k);
+      return z;
+    };
+    auto to_X = [&](const Eigen::VectorXd& z, MatX3d& Y) {
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v) Y(v, k) = z[off[k] + red_.var[k][v]];
+    };
+    // Scale: J / s has mean volume ratio 1.
+    double vol = 0;
+    for (int t = 0; t < nt; ++t) vol += arap_rest_.w[t] * volume_ratio(X, T_, arap_rest_, t);
+    const double s = std::cbrt(std::max(vol, 1e-300));
+    constexpr double theta = 0.5;
+    auto chi = [](double D, double e) { return 0.5 * (D + std::sqrt(e * e + D * D)); };
+    auto min_det = [&](const MatX3d& Y) {
+      double m = std::numeric_limits<double>::infinity();
+      for (int t = 0; t < nt; ++t) m = std::min(m, volume_ratio(Y, T_, arap_rest_, t) / (s * s * s));
+      return m;
+    };
+    MatX3d Y = X;
+    // Energy and gradient over z.
+    Eigen::VectorXd gX;
+    auto evaluate = [&](const Eigen::VectorXd& z, double eps, Eigen::VectorXd* gz) {
+      to_X(z, Y);
+      if (gz) gX.setZero(3 * n);
+      const double E = deform::untangle_energy(Y, T_, arap_rest_, eps, s, theta, gz ? &gX : nullptr);
+      if (gz) {
+        gz->setZero(N);
+        for (int k = 0; k < 3; ++k)
+          for (int v = 0; v < n; ++v) (*gz)[off[k] + red_.var[k][v]] += gX[3 * v + k];
+      }
+      return E;
+    };
+    auto precondition = [&](const Eigen::VectorXd& q) {
+      Eigen::VectorXd r(N);
+      for (int k = 0; k < 3; ++k)
+        if (red_.nvar[k] > 0) r.segment(off[k], red_.nvar[k]) = solver_[k]->solve(q.segment(off[k], red_.nvar[k]));
+      return r;
+    };
+
+    Eigen::VectorXd z = to_z(X);
+    double dmin = min_det(X);
+    double eps = std::sqrt(1e-12 + 0.04 * std::pow(std::min(dmin, 0.0), 2));
+    int total = 0;
+    inverted = count_inverted(X, T_, arap_rest_);
+    int best = inverted, since_best = 0;
+    constexpr int patience = 6;  // rounds without fewer inverted tets before giving up
+    for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience; ++round) {
+      // L-BFGS at this eps.
+      constexpr int m = 8;
+      std::vector<Eigen::VectorXd> S, Yv;
+      std::vector<double> rho;
+      Eigen::VectorXd g, gt;
+      double E = evaluate(z, eps, &g);
+      const double E0 = E;
+      for (int it = 0; it < max_inner; ++it, ++total) {
+        // Two-loop recursion with H0 = gamma K^-1.
+        Eigen::VectorXd q = g;
+        std::vector<double> a(S.size());
+        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
+          a[i] = rho[i] * S[i].dot(q);
+          q -= a[i] * Yv[i];
+        }
+        Eigen::VectorXd r = precondition(q);
+        if (!S.empty()) {
+          const Eigen::VectorXd Ky = precondition(Yv.back());
+          r *= S.back().dot(Yv.back()) / std::max(Yv.back().dot(Ky), 1e-300);
+        }
+        for (size_t i = 0; i < S.size(); ++i) {
+          const double b = rho[i] * Yv[i].dot(r);
+          r += (a[i] - b) * S[i];
+        }
+        Eigen::VectorXd d = -r;
+        double slope = d.dot(g);
+        if (!(slope < 0)) {  // not a descent direction: restart with the preconditioned gradient
+          S.clear(), Yv.clear(), rho.clear();
+          d = -precondition(g);
+          slope = d.dot(g);
+          if (!(slope < 0)) break;
+        }
+        double step = 1, Et = E;
+        bool ok = false;
+        for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+          Et = evaluate(z + step * d, eps, &gt);
+          if (Et <= E + 1e-4 * step * slope) {
+            ok = true;
+            break;
+          }
+        }
+        if (!ok) break;
+        const Eigen::VectorXd sv = step * d, yv = gt - g;
+        z += sv;
+        const double decrease = E - Et;
+        E = Et;
+        g = gt;
+        const double sy = sv.dot(yv);
+        if (sy > 1e-300) {
+          if (static_cast<int>(S.size()) == m) S.erase(S.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
+          S.push_back(sv);
+          Yv.push_back(yv);
+          rho.push_back(1 / sy);
+        }
+        // The inverted tets are few and local: a global relative test would stop long before
+        // they are repaired, so run until they are gone or the energy stops moving at all.
+        if (decrease < 1e-13 * std::abs(E)) break;
+        if (it % 10 == 9) {
+          to_X(z, Y);
+          if (count_inverted(Y, T_, arap_rest_) == 0) {
+            ++total;
+            break;
+          }
+        }
+      }
+      to_X(z, Y);
+      inverted = count_inverted(Y, T_, arap_rest_);
+      dmin = min_det(Y);
+      hooks_.debug("elliptic untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
+                   ", min det " + std::to_string(dmin) + ", " + std::to_string(inverted) + " inverted, " +
+                   std::to_string(total) + " iterations" +
+                   (inverted > 0 && inverted < 4 ? ": " + inverted_tets(Y, &inverted) : std::string()));
+      if (inverted < best) best = inverted, since_best = 0;
+      else ++since_best;
+      // The paper's eps update.
+      const double sigma = std::max(1 - E / E0, 0.1);
+      const double mu = (1 - sigma) * chi(dmin, eps);
+      eps = dmin < mu ? 2 * std::sqrt(mu * (mu - dmin)) : 1e-13;
+    }
+    to_X(z, X);
+    return total;
+  }
+
   // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
   // A Newton step with the barrier's curvature: (K (x) I3 + sum_active b''(J) dJ dJ^T) d = -g over
   // the unknowns of `mode`, all axes coupled, factorized afresh. Used when the constant-Hessian
@@ -341,18 +506,8 @@ class Realizer {
         dt *= 0.5;
         if (dt < 1e-4 || steps > max_steps) {
           // Name the tets that block the path, for the failure message.
-          std::string who;
           int count = 0;
-          for (int t = 0; t < T_.rows(); ++t)
-            if (!(volume_ratio(Xt, T_, arap_rest_, t) > 0) && count++ < 3) {
-              who += (who.empty() ? "" : "; ") + std::string("tet ") + std::to_string(t) + " (";
-              for (int j = 0; j < 4; ++j) {
-                const int v = T_(t, j);
-                who += (j ? " " : "") + std::to_string(v) + ":";
-                for (int k = 0; k < 3; ++k) who += planes_.of_vertex[k][v] >= 0 ? "XYZ"[k] : '-';
-              }
-              who += ")";
-            }
+          const std::string who = inverted_tets(Xt, &count);
           blocked_ = count > 0 ? std::to_string(count) + " tets would invert at t = " + std::to_string(t) + ", e.g. " +
                                      who + " (vertex:axes of its planes)"
                                : std::to_string(max_steps) + " steps reached only t = " + std::to_string(t);
@@ -544,6 +699,20 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         cnt[planes.of_vertex[k][v]]++;
       }
     for (int p = 0; p < planes.count[k]; ++p) planes.height[k][p] /= std::max(1, cnt[p]);
+    {
+      // How far the deformed vertices of each plane are from it: large spreads mean a chart that
+      // is far from flat, or charts joined into one plane that the deformation put apart.
+      std::vector<double> spread(planes.count[k], 0.0);
+      for (int v = 0; v < n; ++v)
+        if (planes.of_vertex[k][v] >= 0)
+          spread[planes.of_vertex[k][v]] = std::max(spread[planes.of_vertex[k][v]],
+                                                    std::abs(deformed(v, k) - planes.height[k][planes.of_vertex[k][v]]));
+      const double diag = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
+      for (int p = 0; p < planes.count[k]; ++p)
+        if (spread[p] > 0.01 * diag)
+          hooks.debug(std::string("plane ") + "XYZ"[k] + std::to_string(p) + " at " + std::to_string(planes.height[k][p]) +
+                      ": deformed vertices up to " + std::to_string(spread[p] / diag) + " x diag away");
+    }
     r.planes[k] = planes.count[k];
     if (planes.count[k] < 2) return fail(std::string("fewer than two planes normal to ") + "XYZ"[k]);
   }
@@ -648,7 +817,18 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
   if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto)");
   bool have = false;
+  int have_flipped = 0;
   std::string last_failure, failures;
+  const double diag0 = (def.colwise().maxCoeff() - def.colwise().minCoeff()).norm();
+  // Boundary triangles not facing their label's direction (or of zero area) in X.
+  auto misoriented = [&](const MatX3d& X) {
+    int count = 0;
+    for (int f = 0; f < B.rows(); ++f) {
+      const Vec3 N = deform::area_normal(X, B(f, 0), B(f, 1), B(f, 2));
+      count += !(N.dot(label_direction(labels[f])) > 1e-14 * diag0 * diag0);
+    }
+    return count;
+  };
   for (const auto& name : starts) {
     if (!last_failure.empty()) failures += (failures.empty() ? "" : "; ") + last_failure;
     last_failure.clear();
@@ -661,6 +841,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       }
       int inverted = 0;
       ut = solver.untangle(X, inverted);
+      if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
       if (inverted > 0) {
         hooks.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
                     std::to_string(ut) + " untangling steps");
@@ -692,7 +873,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       if (!landed) {
         solver.land(X);
         int inverted = 0;
-        const int u2 = solver.untangle(X, inverted);
+        int u2 = solver.untangle(X, inverted);
+        if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted);
         hooks.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
                     std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
         ut += u2;
@@ -705,11 +887,16 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     }
     const int it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
     const double arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
+    const int flipped = misoriented(X);
     hooks.debug("realization from the " + name + " start: ARAP " + std::to_string(arap) + " after " +
                 std::to_string(ut) + " untangling/continuation steps and " + std::to_string(it) +
-                " ARAP iterations, " + std::to_string(sw.seconds()) + " s");
-    if (!have || arap < r.arap) {
+                " ARAP iterations, " + std::to_string(flipped) + " misoriented boundary triangles, " +
+                std::to_string(sw.seconds()) + " s");
+    // A valid candidate (every boundary triangle facing its label) beats any invalid one.
+    if (flipped > 0) last_failure = std::to_string(flipped) + " boundary triangles do not face their chart's direction";
+    if (!have || (flipped == 0 && have_flipped > 0) || ((flipped == 0) == (have_flipped == 0) && arap < r.arap)) {
       have = true;
+      have_flipped = flipped;
       r.X = std::move(X);
       r.arap = arap;
       r.start = name;

@@ -12,8 +12,11 @@
 //      tet positive, the other coordinates following by the ARAP response and relaxing (retried
 //      with the barrier 10x and 100x stronger when nearly flat tets stall it: rod, fandisk);
 //      "eq17": the valence-weighted relaxation of Eq. 17 with the same heights (a sparse
-//      least-squares solve per axis), then plain ARAP local/global steps while tets are inverted
-//      (these can get stuck: on box_hole one tet stays inverted);
+//      least-squares solve per axis), then plain ARAP local/global steps while tets are inverted;
+//      either start, if tets are still inverted (the continuation landed by force, or ARAP steps
+//      got stuck: box_hole at its default size), is untangled by the elliptic energy of Garanzha
+//      et al. 2021 (deform::untangle_energy) with the paper's eps schedule, by L-BFGS
+//      preconditioned with the ARAP matrix, planes kept exact (fandisk: 243 inverted -> 0);
 //   2. ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
 //      search that keeps every tet positive, and a barrier that only acts on nearly flat tets; when
 //      a step comes out short, the next one also uses the barrier's Gauss-Newton Hessian (all axes
@@ -32,7 +35,8 @@
 namespace polycube::chart {
 
 struct RealizeOptions {
-  /// "continuation", "eq17" (the paper's), or "auto": both, the lower final ARAP distortion wins.
+  /// "continuation", "eq17" (the paper's), or "auto": both; a result with every boundary triangle
+  /// facing its label beats one without, then the lower final ARAP distortion wins.
   std::string start = "auto";
   int max_iterations = 200;       ///< ARAP Newton iterations at most
   double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively

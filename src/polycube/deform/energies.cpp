@@ -275,6 +275,39 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   return weight * E;
 }
 
+double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
+                       double theta, Eigen::VectorXd* grad) {
+  double E = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+    const Eigen::Matrix3d J = Ds * Di / scale;
+    const double D = J.determinant();
+    const double root = std::sqrt(eps * eps + D * D);
+    const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
+    const double f = J.squaredNorm() / chi23, g = (D * D + 1) / chi;
+    E += rest.w[t] * ((1 - theta) * f + theta * g);
+    if (!grad) continue;
+    const double dchi = chi / root;  // chi'(D)
+    Eigen::Matrix3d cof;             // dD/dJ, valid for any sign of D
+    cof.col(0) = J.col(1).cross(J.col(2));
+    cof.col(1) = J.col(2).cross(J.col(0));
+    cof.col(2) = J.col(0).cross(J.col(1));
+    const Eigen::Matrix3d dEdF = rest.w[t] / scale *
+                                 ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) +
+                                  theta * ((2 * D - g * dchi) / chi) * cof);
+    Eigen::Matrix<double, 4, 3> B;
+    B.bottomRows<3>() = Di;
+    B.row(0) = -Di.colwise().sum();
+    Eigen::Matrix<double, 12, 1> ge;
+    for (int p = 0; p < 4; ++p) ge.segment<3>(3 * p) = dEdF * B.row(p).transpose();
+    scatter_grad<12>(*grad, v, ge);
+  }
+  return E;
+}
+
 namespace {
 // Per pair: the derivative of n_f and n_g over (a, b, c, d).
 struct PairNormals {

@@ -69,6 +69,15 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
                              Eigen::VectorXd* grad, HessianSink* hess);
 
+/// Untangling energy of Garanzha et al. ("Foldover-free maps in 50 lines of code", ACM ToG 2021):
+/// sum_t w_t [(1 - theta) tr(J^T J) / chi(D)^(2/3) + theta (D^2 + 1) / chi(D)], J = F_t / scale,
+/// D = det J, chi(D) = (D + sqrt(eps^2 + D^2)) / 2. Finite for inverted tets (unlike a barrier);
+/// as eps -> 0 an inverted tet costs without bound, so minimizing it with eps decreasing untangles
+/// a map. `scale` sets the volume ratio the energy prefers (cube root of the mean det F).
+/// Gradient exact (no Hessian: it is minimized by quasi-Newton).
+double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
+                       double theta, Eigen::VectorXd* grad);
+
 /// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
 /// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
 double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,

@@ -346,6 +346,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
                        {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
                        {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite},
+                       {"collapsed", ex.cleanup.collapsed},
                        {"relabelled_faces", ex.cleanup.relabelled_faces}};
       pj["chart_graph"] = {{"valid", ex.charts.valid},
                            {"opposite_adjacent", ex.charts.opposite_adjacent},
