@@ -112,8 +112,24 @@ int main(int argc, char** argv) {
   app.add_option("--eps0", d.eps0, "Polycube deformation: initial smoothing eps of |c| ~ sqrt(c^2+eps) (divided by sqrt 2 per step)")
       ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--eps-min", d.eps_min, "Polycube deformation: smallest eps")->capture_default_str()->check(CLI::PositiveNumber);
-  app.add_option("--beta", d.beta, "Polycube deformation: complexity penalty weight (larger = fewer polycube corners)")
+  app.add_option("--beta", d.beta,
+                 "Polycube deformation: complexity penalty weight (Eq. 10): larger = fewer polycube corners and "
+                 "charts, at more distortion (the paper uses 0.1-4; 0 = off)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--constraints", opt.constraints_file,
+                 "JSON file of sharp/flat edge and region constraints (Eqs. 12-13; format in the README)")
+      ->check(CLI::ExistingFile);
+  app.add_option("--features", opt.features,
+                 "auto: input edges sharper than --feature-angle become sharp constraints; off")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "off"}));
+  app.add_option("--feature-angle", opt.feature_angle,
+                 "Angle between adjacent normals above which an edge is a feature (degrees)")
+      ->capture_default_str()->check(CLI::Range(1.0, 179.0));
+  app.add_option("--export-features", opt.export_features,
+                 "Write the detected features to this file in the constraint format (with --features auto)");
+  app.add_option("--constraint-weight", opt.constraint.weight,
+                 "Default weight omega of a constrained edge (Eqs. 12-13), relative to the normalized energies")
+      ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--barrier-weight", d.barrier_weight, "Polycube deformation: anti-foldover barrier weight (Eq. 11)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--volume-barrier", d.volume_barrier_weight,

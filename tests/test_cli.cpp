@@ -338,3 +338,30 @@ TEST(Cli, QuadMeshOfTheSphere) {
   EXPECT_NEAR(m["quad"]["sj_min"].get<double>(), q["sj_min"].get<double>(), 1e-12);
   EXPECT_NEAR(m["quad"]["hausdorff_rel"].get<double>(), q["hausdorff_rel"].get<double>(), 1e-12);
 }
+
+TEST(Cli, AutoFeaturesAreExportedInTheConstraintFormat) {
+  const std::string out = temp_dir("cli_features");
+  RunResult r = run_cli("--example chamfer_box --until tet --features auto --feature-angle 30 --export-features " +
+                        out + "/features.json -o " + out + "/run");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = report(out + "/run");
+  EXPECT_EQ(j["constraints"]["count"], 15);
+  EXPECT_EQ(j["constraints"]["sharp"], 15);
+  // The exported file reads back as 15 sharp constraints, and can be fed back.
+  const json f = json::parse(read_text(out + "/features.json"));
+  ASSERT_EQ(f["constraints"].size(), 15u);
+  r = run_cli("--example chamfer_box --until tet --constraints " + out + "/features.json -o " + out + "/run2");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(report(out + "/run2")["constraints"]["count"], 15);
+  // A broken constraint file: exit 3 with the file and entry named; an id out of range: exit 2.
+  write_text(out + "/bad.json", "{\"constraints\": [{\"type\": \"sharp\"}]}");
+  r = run_cli("--example chamfer_box --until tet --constraints " + out + "/bad.json -o " + out + "/run3");
+  EXPECT_EQ(r.code, 3) << r.output;
+  EXPECT_NE(r.output.find("bad.json: constraint 0"), std::string::npos) << r.output;
+  write_text(out + "/far.json", "{\"constraints\": [{\"type\": \"sharp\", \"edges\": [[0, 99999]]}]}");
+  r = run_cli("--example chamfer_box --until load --constraints " + out + "/far.json -o " + out + "/run4");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("out of range"), std::string::npos) << r.output;
+  r = run_cli("--example chamfer_box --until tet --export-features " + out + "/x.json -o " + out + "/run5");
+  EXPECT_EQ(r.code, 2) << r.output;
+}

@@ -21,11 +21,24 @@ const std::vector<ExampleInfo>& list() {
       {"sphere", "unit sphere (6 charts expected as a polycube)"},
       {"rocker", "rocker-arm-like part: two bosses with holes joined by an arm (genus 2)"},
       {"two_components", "a cube and a separate sphere (two components)"},
+      {"chamfer_box", "unit cube with one edge chamfered at 45 degrees (15 feature curves at 30 degrees)"},
+      {"bumpy_box", "2 x 2 x 1 box with four spherical bumps (radius 0.3) on its top (beta removes their charts)"},
+      {"ramp", "2 x 1 x 1 block whose top-right edge is cut by a 35-degree slope (a polycube rounds the top edge of the slope away)"},
   };
   return l;
 }
 
 namespace {
+// A prism: the polygon (x, z) pts in the plane y = 0, extruded by `depth` along +y.
+void prism(const std::vector<std::pair<double, double>>& pts, double depth) {
+  std::vector<int> p, l;
+  for (auto [x, z] : pts) p.push_back(occ::addPoint(x, 0, z));
+  for (size_t i = 0; i < p.size(); ++i) l.push_back(occ::addLine(p[i], p[(i + 1) % p.size()]));
+  const int s = occ::addPlaneSurface({occ::addCurveLoop(l)});
+  DimTags out;
+  occ::extrude({{2, s}}, 0, depth, 0, out);
+}
+
 void build(const std::string& name) {
   if (name == "box_hole") {
     int b = occ::addBox(0, 0, 0, 2, 1.5, 1);
@@ -53,6 +66,18 @@ void build(const std::string& name) {
     int h1 = occ::addCylinder(0, 0, -0.5, 0, 0, 2, 0.3);
     int h2 = occ::addCylinder(3, 0, -0.5, 0, 0, 2, 0.2);
     occ::cut(fused, {{3, h1}, {3, h2}}, out, map);
+  } else if (name == "chamfer_box") {
+    prism({{0, 0}, {1, 0}, {1, 0.75}, {0.75, 1}, {0, 1}}, 1);
+  } else if (name == "bumpy_box") {
+    const int b = occ::addBox(0, 0, 0, 2, 2, 1);
+    DimTags bumps, out;
+    for (double x : {0.6, 1.4})
+      for (double y : {0.6, 1.4}) bumps.push_back({3, occ::addSphere(x, y, 0.95, 0.3)});
+    std::vector<DimTags> map;
+    occ::fuse({{3, b}}, bumps, out, map);
+  } else if (name == "ramp") {
+    const double t = std::tan(35 * M_PI / 180);
+    prism({{0, 0}, {2, 0}, {2, 1 - 0.8 * t}, {1.2, 1}, {0, 1}}, 1);
   } else if (name == "two_components") {
     occ::addBox(0, 0, 0, 1, 1, 1);
     occ::addSphere(2.5, 0.5, 0.5, 0.5);

@@ -279,11 +279,82 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         normals.row(f) = deform::area_normal(dm.V, dm.F(f, 0), dm.F(f, 1), dm.F(f, 2)).normalized().transpose();
       io::write_vtk(stage_path("deformed.vtk"), dm, opt.vtk_binary, fields, {{"normal", normals}});
     };
+    // ---- user constraints (sharp / flat edges) --------------------------------------------
+    std::vector<constraints::Constraint> user;
+    if (!opt.export_features.empty() && opt.features != "auto")
+      throw Error(ErrorKind::Usage, "--export-features needs --features auto");
+    if (!opt.constraints_file.empty()) {
+      user = constraints::read_constraints(opt.constraints_file);
+      for (size_t i = 0; i < user.size(); ++i) constraints::constraint_edges(user[i], surface, static_cast<int>(i));  // ids
+      hooks.info("read " + std::to_string(user.size()) + " constraints from " + opt.constraints_file);
+    }
+    if (opt.features == "auto") {
+      auto found = constraints::detect_features(surface, opt.feature_angle);
+      hooks.info("detected " + std::to_string(found.size()) + " sharp feature curves (angle > " +
+                 std::to_string(opt.feature_angle) + " deg)");
+      if (!opt.export_features.empty()) constraints::write_constraints(opt.export_features, found);
+      user.insert(user.end(), found.begin(), found.end());
+    } else if (opt.features != "off") {
+      throw Error(ErrorKind::Usage, "--features must be auto or off, not '" + opt.features + "'");
+    }
+    const std::vector<deform::FacePair> pairs =
+        user.empty() || static_cast<int>(opt.until) < static_cast<int>(Stage::Deform) ? std::vector<deform::FacePair>{}
+                                                                                       : deform::face_pairs(tm.boundary);
+    constraints::Mapped mapped;
+    json cj;
+    if (!user.empty()) {
+      int sharp = 0;
+      for (const auto& c : user) sharp += c.sharp;
+      cj = {{"count", user.size()}, {"sharp", sharp}, {"flat", static_cast<int>(user.size()) - sharp},
+            {"weight", opt.constraint.weight}, {"features", opt.features}};
+      if (opt.features == "auto") cj["feature_angle_deg"] = opt.feature_angle;
+      if (!pairs.empty()) {
+        mapped = constraints::map_to_boundary(user, surface, tm.V, tm.boundary, pairs, opt.constraint);
+        int unmapped = 0;
+        for (size_t i = 0; i < user.size(); ++i) unmapped += mapped.mapped_edges[i] == 0;
+        cj["edges"] = mapped.terms.size();
+        cj["unmapped_constraints"] = unmapped;
+        if (unmapped > 0)
+          hooks.warn(std::to_string(unmapped) + " constraints found no edge of the tet boundary (see report.json)");
+      }
+      report["constraints"] = cj;
+    }
+
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform)) {
       Stopwatch sd;
       hooks.report("deform", 0);
       hooks.info("deforming towards a polycube (" + std::to_string(tm.T.rows()) + " tets)");
-      dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, opt.deform, hooks);
+      deform::DeformOptions dopt = opt.deform;
+      dopt.edges.insert(dopt.edges.end(), mapped.terms.begin(), mapped.terms.end());
+      dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, dopt, hooks);
+      if (!mapped.terms.empty()) {
+        // Final normal angle per constrained edge (90 for a polycube edge, 0 inside a face).
+        const std::vector<double> ang = constraints::normal_angles_deg(mapped, dr.X, tm.boundary, pairs);
+        json per = json::array();
+        double worst = 0;
+        for (size_t i = 0; i < user.size(); ++i) {
+          double mn = 180, mx = 0, mean = 0, err = 0;
+          int n = 0;
+          for (size_t t = 0; t < ang.size(); ++t) {
+            if (mapped.owner[t] != static_cast<int>(i)) continue;
+            mn = std::min(mn, ang[t]);
+            mx = std::max(mx, ang[t]);
+            mean += ang[t];
+            err = std::max(err, std::abs(ang[t] - (user[i].sharp ? 90.0 : 0.0)));
+            ++n;
+          }
+          json e = {{"name", user[i].name}, {"type", user[i].sharp ? "sharp" : "flat"},
+                    {"input_edges", mapped.input_edges[i]}, {"edges", n}};
+          if (n > 0) {
+            e["angle_deg"] = {{"min", mn}, {"mean", mean / n}, {"max", mx}};
+            e["worst_error_deg"] = err;
+            worst = std::max(worst, err);
+          }
+          per.push_back(e);
+        }
+        report["constraints"]["worst_dihedral_error_deg"] = worst;
+        report["constraints"]["per_constraint"] = per;
+      }
       json pj = {{"l1_quality", dr.l1_quality},
                  {"error_d", dr.error_d},
                  {"arap_distortion", dr.arap},
@@ -348,6 +419,23 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite},
                        {"collapsed", ex.cleanup.collapsed},
                        {"relabelled_faces", ex.cleanup.relabelled_faces}};
+      if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
+        // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
+        // axes (a polycube edge), a flat one when they share the label.
+        std::vector<int> ok(user.size(), 0);
+        int all_ok = 0;
+        for (size_t t = 0; t < mapped.terms.size(); ++t) {
+          const auto& pr = pairs[mapped.terms[t].pair];
+          const int lf = ex.labels[pr.f], lg = ex.labels[pr.g];
+          const bool sat = mapped.terms[t].sharp ? lf / 2 != lg / 2 : lf == lg;
+          ok[mapped.owner[t]] += sat;
+          all_ok += sat;
+        }
+        auto& per = report["constraints"]["per_constraint"];
+        for (size_t i = 0; i < user.size(); ++i)
+          if (per[i]["edges"].get<int>() > 0) per[i]["polycube_satisfied"] = ok[i] / per[i]["edges"].get<double>();
+        report["constraints"]["polycube_satisfied"] = all_ok / static_cast<double>(mapped.terms.size());
+      }
       pj["chart_graph"] = {{"valid", ex.charts.valid},
                            {"opposite_adjacent", ex.charts.opposite_adjacent},
                            {"high_valence_corners", ex.charts.high_valence_corners},

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "polycube/chart/extract.h"
+#include "polycube/constraints/constraints.h"
 #include "polycube/core/log.h"
 #include "polycube/deform/solver.h"
 #include "polycube/hex/extract.h"
@@ -39,6 +40,15 @@ struct PipelineOptions {
   ValidateOptions validate;
   TetOptions tet;
   deform::DeformOptions deform;
+  /// User control (constraints/constraints.h): a constraint file (ids into the validated input
+  /// surface, OUTDIR/surface.mesh), automatic sharp features ("auto": edges whose normals differ
+  /// by more than feature_angle degrees become sharp constraints; "off"), and a path to write the
+  /// detected features to in the constraint format (empty = none).
+  std::string constraints_file;
+  std::string features = "off";
+  double feature_angle = 30;
+  std::string export_features;
+  constraints::ConstraintOptions constraint;
   chart::ExtractOptions polycube;
   hex::HexOptions hex;
   /// Quad stage: approximate quad count (0 = the hex stage's resolution) and smoothing.
