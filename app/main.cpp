@@ -116,6 +116,11 @@ int main(int argc, char** argv) {
                  "Polycube deformation: complexity penalty weight (Eq. 10): larger = fewer polycube corners and "
                  "charts, at more distortion (the paper uses 0.1-4; 0 = off)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  std::vector<double> beta_sweep;
+  app.add_option("--beta-sweep", beta_sweep,
+                 "Run once per beta (comma-separated, e.g. 0,0.5,2) into OUTDIR/beta_<b>/ and write a summary table "
+                 "OUTDIR/beta_sweep.tsv (corners, charts, ARAP distortion)")
+      ->delimiter(',');
   app.add_option("--constraints", opt.constraints_file,
                  "JSON file of sharp/flat edge and region constraints (Eqs. 12-13; format in the README)")
       ->check(CLI::ExistingFile);
@@ -249,6 +254,22 @@ int main(int argc, char** argv) {
       out_dir = "out/" + stem;
     }
     opt.out_dir = out_dir;
+    if (!beta_sweep.empty()) {
+      if (opt.until < Stage::Polycube) opt.until = Stage::Polycube;
+      const auto summary = run_beta_sweep(opt, beta_sweep, hooks);
+      int code = 0;
+      std::printf("%8s  %-6s %8s %7s %10s %10s %10s %8s\n", "beta", "status", "corners", "charts", "arap_def",
+                  "arap_poly", "l1", "seconds");
+      for (const auto& r : summary["beta_sweep"]) {
+        auto num = [&](const char* k) { return r.contains(k) ? r[k].get<double>() : -1.0; };
+        std::printf("%8g  %-6s %8.0f %7.0f %10.4f %10.4f %10.2e %8.1f\n", r["beta"].get<double>(),
+                    r["status"].get<std::string>().c_str(), num("corners"), num("charts"),
+                    num("deformed_arap_distortion"), num("arap_distortion"), num("l1_quality"), num("seconds"));
+        if (code == 0 && r.contains("exit_code")) code = r["exit_code"].get<int>();
+      }
+      logger->info("beta sweep written to {}/beta_sweep.tsv", out_dir);
+      return code;
+    }
     auto report = run_pipeline(opt, hooks);
     logger->info("done in {:.2f} s; results in {}/ (report.json)", report["timings"]["total"].get<double>(), out_dir);
     return 0;

@@ -1,4 +1,5 @@
 // End-to-end runs of the command-line tool.
+#include <algorithm>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
@@ -364,4 +365,24 @@ TEST(Cli, AutoFeaturesAreExportedInTheConstraintFormat) {
   EXPECT_NE(r.output.find("out of range"), std::string::npos) << r.output;
   r = run_cli("--example chamfer_box --until tet --export-features " + out + "/x.json -o " + out + "/run5");
   EXPECT_EQ(r.code, 2) << r.output;
+}
+
+TEST(Cli, BetaSweepWritesOneFolderPerBetaAndATable) {
+  const std::string out = temp_dir("cli_sweep");
+  fs::create_directories(out + "/beta_7");  // a stale result of an earlier sweep
+  RunResult r = run_cli("--example l_bracket --beta-sweep 0,2 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_FALSE(fs::exists(out + "/beta_7"));
+  const json s = json::parse(read_text(out + "/beta_sweep.json"));
+  ASSERT_EQ(s["beta_sweep"].size(), 2u);
+  for (int i = 0; i < 2; ++i) {
+    const json& row = s["beta_sweep"][i];
+    EXPECT_EQ(row["status"], "ok");
+    EXPECT_EQ(row["corners"], 12);  // the L-block keeps its 12 corners for any beta
+    const json rep = report(out + "/" + row["folder"].get<std::string>());
+    EXPECT_EQ(rep["polycube"]["options"]["beta"], i == 0 ? 0.0 : 2.0);
+  }
+  const std::string tsv = read_text(out + "/beta_sweep.tsv");
+  EXPECT_EQ(std::count(tsv.begin(), tsv.end(), '\n'), 3) << tsv;
+  EXPECT_NE(r.output.find("corners"), std::string::npos) << r.output;
 }

@@ -13,6 +13,9 @@ struct ExtractOptions {
   /// Triangles whose deformed area is below this fraction of the median deformed/rest area ratio
   /// take their neighbours' label before cleanup (relabel_collapsed); 0 = off.
   double collapsed_ratio = 1e-3;
+  /// When the realization leaves boundary triangles facing away from their label (every tet
+  /// positive), relabel them from their neighbours and retry, at most this many times.
+  int relabel_attempts = 4;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };

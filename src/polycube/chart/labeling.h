@@ -69,6 +69,7 @@ struct CleanupStats {
   int opposite = 0;    ///< charts relabelled because they met a chart of the opposite label
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
+  int misoriented = 0; ///< triangles relabelled after a realization left them facing away (extract_polycube)
   int rounds = 0;
 };
 

@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <map>
 #include <fstream>
+#include <sstream>
+#include <cmath>
 
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
@@ -417,7 +419,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
                        {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
                        {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite},
-                       {"collapsed", ex.cleanup.collapsed},
+                       {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
                        {"relabelled_faces", ex.cleanup.relabelled_faces}};
       if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
         // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
@@ -696,6 +698,62 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     }
     throw;
   }
+}
+
+json run_beta_sweep(const PipelineOptions& opt, const std::vector<double>& betas, const Hooks& hooks) {
+  if (betas.empty()) throw Error(ErrorKind::Usage, "the beta sweep needs at least one value");
+  for (double b : betas)
+    if (!(b >= 0) || !std::isfinite(b)) throw Error(ErrorKind::Usage, "beta must be >= 0, not " + std::to_string(b));
+  std::error_code ec;
+  fs::create_directories(opt.out_dir, ec);
+  if (ec) throw Error(ErrorKind::Output, opt.out_dir + ": cannot create the output folder (" + ec.message() + ")");
+  // Results of an earlier sweep in this folder go first (only what a sweep writes).
+  for (const auto& entry : fs::directory_iterator(opt.out_dir, ec)) {
+    const std::string n = entry.path().filename().string();
+    if ((entry.is_directory() && n.rfind("beta_", 0) == 0) || n == "beta_sweep.json" || n == "beta_sweep.tsv")
+      fs::remove_all(entry.path(), ec);
+  }
+  json rows = json::array();
+  for (double b : betas) {
+    PipelineOptions o = opt;
+    o.deform.beta = b;
+    std::ostringstream name;
+    name << "beta_" << b;
+    o.out_dir = (fs::path(opt.out_dir) / name.str()).string();
+    hooks.info("beta sweep: beta = " + name.str().substr(5) + " -> " + o.out_dir);
+    json row = {{"beta", b}, {"folder", name.str()}};
+    try {
+      const json r = run_pipeline(o, hooks);
+      row["status"] = "ok";
+      if (r.contains("polycube")) {
+        const json& p = r["polycube"];
+        for (const char* k : {"corners", "charts", "arap_distortion", "deformed_arap_distortion", "l1_quality"})
+          if (p.contains(k)) row[k] = p[k];
+      }
+      row["seconds"] = r["timings"]["total"];
+    } catch (const Error& e) {
+      row["status"] = "error";
+      row["exit_code"] = exit_code(e.kind());
+      row["message"] = e.what();
+      hooks.warn("beta " + name.str().substr(5) + ": " + e.what());
+    }
+    rows.push_back(row);
+  }
+  const json summary = {{"beta_sweep", rows}};
+  {
+    std::ofstream f(fs::path(opt.out_dir) / "beta_sweep.json");
+    f << summary.dump(1) << "\n";
+    if (!f) throw Error(ErrorKind::Output, opt.out_dir + "/beta_sweep.json: write failed");
+  }
+  std::ofstream t(fs::path(opt.out_dir) / "beta_sweep.tsv");
+  t << "beta\tstatus\tcorners\tcharts\tarap_deformed\tarap_polycube\tl1_quality\tseconds\n";
+  auto cell = [](const json& r, const char* k) { return r.contains(k) ? r[k].dump() : std::string("-"); };
+  for (const json& r : rows)
+    t << r["beta"].get<double>() << "\t" << r["status"].get<std::string>() << "\t" << cell(r, "corners") << "\t"
+      << cell(r, "charts") << "\t" << cell(r, "deformed_arap_distortion") << "\t" << cell(r, "arap_distortion") << "\t"
+      << cell(r, "l1_quality") << "\t" << cell(r, "seconds") << "\n";
+  if (!t) throw Error(ErrorKind::Output, opt.out_dir + "/beta_sweep.tsv: write failed");
+  return summary;
 }
 
 }  // namespace polycube

@@ -63,4 +63,10 @@ const std::vector<std::string>& output_files();
 /// Throws polycube::Error after writing the error report.
 nlohmann::json run_pipeline(const PipelineOptions& opt, const Hooks& hooks = {});
 
+/// The complexity trade-off (paper Fig. 17): runs the pipeline once per beta into
+/// OUTDIR/beta_<value>/ and writes OUTDIR/beta_sweep.json and OUTDIR/beta_sweep.tsv, one row per
+/// beta: status, corners, charts, ARAP distortion (deformed and polycube), l1_quality, seconds.
+/// A failing run is recorded in its row (status, exit_code, message) and the sweep goes on.
+nlohmann::json run_beta_sweep(const PipelineOptions& opt, const std::vector<double>& betas, const Hooks& hooks = {});
+
 }  // namespace polycube
