@@ -386,3 +386,22 @@ TEST(Cli, BetaSweepWritesOneFolderPerBetaAndATable) {
   EXPECT_EQ(std::count(tsv.begin(), tsv.end(), '\n'), 3) << tsv;
   EXPECT_NE(r.output.find("corners"), std::string::npos) << r.output;
 }
+
+TEST(Cli, ConstraintGroupsComeFromTheInputFile) {
+  const std::string out = temp_dir("cli_groups");
+  // A unit cube whose top is the OBJ group "lid".
+  write_text(out + "/cube.obj",
+             "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+             "g body\nf 1 4 3 2\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\ng lid\nf 5 6 7 8\n");
+  write_text(out + "/lid.json", "{\"constraints\": [{\"type\": \"flat\", \"group\": \"lid\"}]}");
+  RunResult r = run_cli(out + "/cube.obj --until deform --constraints " + out + "/lid.json -o " + out + "/run");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = report(out + "/run");
+  EXPECT_EQ(j["constraints"]["flat"], 1);
+  EXPECT_EQ(j["constraints"]["edges"], 1);  // the lid's two triangles share one edge
+  EXPECT_LT(j["constraints"]["worst_dihedral_error_deg"].get<double>(), 1e-6);
+  write_text(out + "/nose.json", "{\"constraints\": [{\"type\": \"flat\", \"group\": \"nose\"}]}");
+  r = run_cli(out + "/cube.obj --until load --constraints " + out + "/nose.json -o " + out + "/run2");
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("group 'nose'"), std::string::npos) << r.output;
+}

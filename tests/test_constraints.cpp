@@ -5,6 +5,7 @@
 #include "polycube/constraints/constraints.h"
 #include "polycube/core/error.h"
 #include "polycube/examples/examples.h"
+#include "polycube/io/readers.h"
 #include "polycube/pipeline/pipeline.h"
 #include "test_util.h"
 
@@ -191,4 +192,52 @@ TEST(Constraints, BetaAndAFlatRegionRemoveBumps) {
   EXPECT_EQ(fl["polycube"]["corners"], 32);
   EXPECT_EQ(fl["constraints"]["flat"], 1);
   EXPECT_EQ(fl["constraints"]["polycube_satisfied"], 1.0);
+}
+
+TEST(Constraints, PaintedRegionsFromObjGroupsAndPlyProperties) {
+  const std::string dir = temp_dir("painted");
+  // A box whose top face (two triangles) is the group "lid".
+  const SurfaceMesh b = box();
+  std::string obj;
+  for (int v = 0; v < b.V.rows(); ++v)
+    obj += "v " + std::to_string(b.V(v, 0)) + " " + std::to_string(b.V(v, 1)) + " " + std::to_string(b.V(v, 2)) + "\n";
+  std::string ply = "ply\nformat ascii 1.0\nelement vertex " + std::to_string(b.V.rows()) +
+                    "\nproperty float x\nproperty float y\nproperty float z\nelement face " +
+                    std::to_string(b.F.rows()) + "\nproperty list uchar int vertex_indices\nproperty int region\nend_header\n";
+  for (int v = 0; v < b.V.rows(); ++v)
+    ply += std::to_string(b.V(v, 0)) + " " + std::to_string(b.V(v, 1)) + " " + std::to_string(b.V(v, 2)) + "\n";
+  std::vector<int> top;
+  for (int f = 0; f < b.F.rows(); ++f) {
+    bool up = true;
+    for (int k = 0; k < 3; ++k) up = up && b.V(b.F(f, k), 2) == 1.0;
+    if (up) top.push_back(f);
+    obj += std::string(up ? "g lid\n" : "g body\n") + "f " + std::to_string(b.F(f, 0) + 1) + " " +
+           std::to_string(b.F(f, 1) + 1) + " " + std::to_string(b.F(f, 2) + 1) + "\n";
+    ply += "3 " + std::to_string(b.F(f, 0)) + " " + std::to_string(b.F(f, 1)) + " " + std::to_string(b.F(f, 2)) +
+           (up ? " 7\n" : " 0\n");
+  }
+  write_text(dir + "/box.obj", obj);
+  write_text(dir + "/box.ply", ply);
+  const MeshData mo = io::read_mesh(dir + "/box.obj"), mp = io::read_mesh(dir + "/box.ply");
+  ASSERT_EQ(mo.face_group.size(), static_cast<size_t>(b.F.rows()));
+  ASSERT_EQ(mp.face_group.size(), static_cast<size_t>(b.F.rows()));
+  for (int f : top) {
+    EXPECT_EQ(mo.face_group[f], "lid");
+    EXPECT_EQ(mp.face_group[f], "7");
+  }
+  std::vector<constraints::Constraint> cs(1);
+  cs[0].sharp = false;
+  cs[0].group = "lid";
+  constraints::resolve_groups(cs, mo.face_group);
+  EXPECT_EQ(cs[0].faces, top);
+  cs[0].group = "7";
+  cs[0].faces.clear();
+  constraints::resolve_groups(cs, mp.face_group);
+  EXPECT_EQ(cs[0].faces, top);
+  cs[0].group = "nose";
+  EXPECT_THROW(constraints::resolve_groups(cs, mo.face_group), Error);
+  // A file without groups has none.
+  EXPECT_TRUE(io::read_mesh(dir + "/box.obj").face_group.size() == static_cast<size_t>(b.F.rows()));
+  write_text(dir + "/plain.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  EXPECT_TRUE(io::read_mesh(dir + "/plain.obj").face_group.empty());
 }

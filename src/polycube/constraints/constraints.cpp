@@ -56,6 +56,7 @@ std::vector<Constraint> read_constraints(const std::string& path) {
           c.edges.push_back({a, b});
         }
       }
+      if (e.contains("group")) c.group = e["group"].get<std::string>();
       if (e.contains("faces")) {
         for (const json& f : e["faces"]) {
           const int id = f.get<int>();
@@ -66,7 +67,8 @@ std::vector<Constraint> read_constraints(const std::string& path) {
     } catch (const json::exception& ex) {
       throw bad(std::string("wrong value type (") + ex.what() + ")");
     }
-    if (c.edges.empty() && c.faces.empty()) throw bad("neither \"edges\" nor \"faces\" given");
+    if (c.edges.empty() && c.faces.empty() && c.group.empty())
+      throw bad("neither \"edges\", \"faces\" nor \"group\" given");
     if (c.name.empty()) c.name = "constraint " + std::to_string(out.size());
     out.push_back(std::move(c));
   }
@@ -83,11 +85,25 @@ void write_constraints(const std::string& path, const std::vector<Constraint>& c
       for (const auto& p : c.edges) e["edges"].push_back({p[0], p[1]});
     }
     if (!c.faces.empty()) e["faces"] = c.faces;
+    if (!c.group.empty()) e["group"] = c.group;
     arr.push_back(e);
   }
   std::ofstream out(path);
   out << json{{"constraints", arr}}.dump(1) << "\n";
   if (!out) throw Error(ErrorKind::Output, path + ": cannot write the constraint file");
+}
+
+void resolve_groups(std::vector<Constraint>& cs, const std::vector<std::string>& face_group) {
+  for (size_t i = 0; i < cs.size(); ++i) {
+    Constraint& c = cs[i];
+    if (c.group.empty()) continue;
+    const size_t before = c.faces.size();
+    for (size_t f = 0; f < face_group.size(); ++f)
+      if (face_group[f] == c.group) c.faces.push_back(static_cast<int>(f));
+    if (c.faces.size() == before)
+      throw Error(ErrorKind::Usage, "constraint " + std::to_string(i) + " (" + c.name + "): no triangle of the input is in group '" +
+                                        c.group + "'" + (face_group.empty() ? " (the input has no groups)" : ""));
+  }
 }
 
 std::vector<Constraint> detect_features(const SurfaceMesh& s, double angle_deg) {

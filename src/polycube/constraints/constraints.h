@@ -7,9 +7,11 @@
 //   {"constraints": [
 //      {"name": "rim", "type": "sharp", "weight": 100, "edges": [[12, 13], [13, 40]]},
 //      {"type": "flat", "faces": [5, 6, 7, 8]},
-//      {"type": "sharp", "faces": [100, 101]}
+//      {"type": "sharp", "faces": [100, 101]},
+//      {"type": "flat", "group": "logo"}
 //   ]}
-// "edges": pairs of vertex ids joined by an edge of the surface. "faces": a region; a flat region
+// "edges": pairs of vertex ids joined by an edge of the surface. "faces": a region (or "group": the
+// triangles of a painted region of the input, see MeshData::face_group); a flat region
 // constrains every edge inside it (the region becomes part of one polycube face), a sharp region
 // every edge of its border (the border becomes polycube edges). "weight" (omega, optional)
 // defaults to ConstraintOptions::weight.
@@ -29,7 +31,12 @@ struct Constraint {
   double weight = 0;                     ///< omega; 0 = ConstraintOptions::weight
   std::vector<std::array<int, 2>> edges; ///< input vertex id pairs
   std::vector<int> faces;                ///< input triangle ids (a region)
+  std::string group;                     ///< a painted region by name (OBJ group, PLY region value)
 };
+
+/// Adds to every constraint with a group the triangles of that group (face_group: one name per
+/// input triangle, from the reader). Throws Error(Usage) naming a group that no triangle has.
+void resolve_groups(std::vector<Constraint>& c, const std::vector<std::string>& face_group);
 
 struct ConstraintOptions {
   /// Default omega of Eqs. 12-13, per constrained edge. The solver's other terms are normalized

@@ -22,6 +22,10 @@ struct MeshData {
   std::vector<int> face_line;
   /// Per vertex: 1-based line of the file that defined it, 0 for binary files.
   std::vector<int> vertex_line;
+  /// Per row of F: the painted region of its file face, "" for none: OBJ `g` (or `o`) names; the
+  /// integer face property `region`, `group`, `label` or `segment` of PLY files. Empty when the
+  /// file has none. Constraint files select regions by these names ("group": "name").
+  std::vector<std::string> face_group;
   /// Vertices merged because they had identical coordinates (STL only).
   int welded_vertices = 0;
 

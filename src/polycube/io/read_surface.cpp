@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <sstream>
 #include <unordered_map>
 
 #include "polycube/core/error.h"
@@ -22,10 +23,17 @@ MeshData read_obj(const std::string& path) {
   std::vector<int> poly;
   std::string_view line;
   int nface = 0;
+  std::string group;                    // current `g` / `o` name
+  std::vector<std::string> face_groups; // per file face
+  bool any_group = false;
   while (r.next_line(line)) {
     split(line, tok);
     if (tok.empty()) continue;
-    if (tok[0] == "v") {
+    if (tok[0] == "g" || tok[0] == "o") {
+      group.clear();
+      for (size_t k = 1; k < tok.size(); ++k) group += (k > 1 ? " " : "") + str(tok[k]);
+      any_group = any_group || !group.empty();
+    } else if (tok[0] == "v") {
       if (tok.size() < 4) r.fail("vertex needs 3 coordinates, found " + std::to_string(tok.size() - 1));
       double x[3];
       for (int k = 0; k < 3; ++k)
@@ -46,13 +54,18 @@ MeshData read_obj(const std::string& path) {
         poly.push_back(static_cast<int>(i0));
       }
       b.add_polygon(poly, nface++, r.line());
+      face_groups.push_back(group);
     }
-    // vt, vn, vp, g, o, s, usemtl, mtllib, l, p: not geometry we use.
+    // vt, vn, vp, s, usemtl, mtllib, l, p: not geometry we use.
   }
   MeshData m;
   m.path = path;
   m.format = "obj";
   b.finish(m);
+  if (any_group) {
+    m.face_group.resize(m.F.rows());
+    for (int f = 0; f < m.F.rows(); ++f) m.face_group[f] = face_groups[m.face_source[f]];
+  }
   return m;
 }
 
@@ -351,10 +364,14 @@ MeshData read_ply(const std::string& path) {
   BinCursor bc{data, body, format == "binary_big_endian", path, ""};
   std::vector<int> poly;
   int fcount = 0;
+  std::vector<std::string> ply_groups;  // per file face, when a region property exists
   for (const PlyElement& e : elems) {
     const bool is_v = e.name == "vertex", is_f = e.name == "face";
-    int ix = -1, iy = -1, iz = -1, ifc = -1;
+    int ix = -1, iy = -1, iz = -1, ifc = -1, ireg = -1;
     for (size_t k = 0; k < e.props.size(); ++k) {
+      if (!e.props[k].list && (e.props[k].name == "region" || e.props[k].name == "group" ||
+                               e.props[k].name == "label" || e.props[k].name == "segment"))
+        ireg = static_cast<int>(k);
       if (e.props[k].name == "x") ix = static_cast<int>(k);
       if (e.props[k].name == "y") iy = static_cast<int>(k);
       if (e.props[k].name == "z") iz = static_cast<int>(k);
@@ -366,6 +383,7 @@ MeshData read_ply(const std::string& path) {
     if (is_v) nv = e.count;
     for (long long i = 0; i < e.count; ++i) {
       double xyz[3] = {0, 0, 0};
+      double region = 0;
       poly.clear();
       int line = 0;
       bc.what = e.name + " " + std::to_string(i);
@@ -395,6 +413,7 @@ MeshData read_ply(const std::string& path) {
           if (static_cast<int>(k) == ix) xyz[0] = v;
           if (static_cast<int>(k) == iy) xyz[1] = v;
           if (static_cast<int>(k) == iz) xyz[2] = v;
+          if (static_cast<int>(k) == ireg) region = v;
         }
       }
       if (is_v) b.add_vertex(xyz[0], xyz[1], xyz[2], line);
@@ -403,6 +422,11 @@ MeshData read_ply(const std::string& path) {
           throw Error(ErrorKind::Parse, path + (line ? ":" + std::to_string(line) : std::string()) + ": face " +
                                             std::to_string(i) + " has " + std::to_string(poly.size()) + " vertices (needs >= 3)");
         b.add_polygon(poly, fcount++, line);
+        if (ireg >= 0) {
+          std::ostringstream name;
+          name << region;
+          ply_groups.push_back(name.str());
+        }
       }
     }
   }
@@ -410,6 +434,10 @@ MeshData read_ply(const std::string& path) {
   m.path = path;
   m.format = "ply-" + std::string(ascii ? "ascii" : format == "binary_big_endian" ? "binary-be" : "binary-le");
   b.finish(m);
+  if (!ply_groups.empty()) {
+    m.face_group.resize(m.F.rows());
+    for (int f = 0; f < m.F.rows(); ++f) m.face_group[f] = ply_groups[m.face_source[f]];
+  }
   return m;
 }
 

@@ -287,6 +287,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       throw Error(ErrorKind::Usage, "--export-features needs --features auto");
     if (!opt.constraints_file.empty()) {
       user = constraints::read_constraints(opt.constraints_file);
+      constraints::resolve_groups(user, in.face_group.size() == static_cast<size_t>(surface.F.rows())
+                                            ? in.face_group
+                                            : std::vector<std::string>{});
       for (size_t i = 0; i < user.size(); ++i) constraints::constraint_edges(user[i], surface, static_cast<int>(i));  // ids
       hooks.info("read " + std::to_string(user.size()) + " constraints from " + opt.constraints_file);
     }
