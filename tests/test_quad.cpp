@@ -61,3 +61,27 @@ TEST(Quad, BoxGivesARegularQuadMeshWithEightIrregularVertices) {
   }
   for (const auto& [e, n] : edges) EXPECT_EQ(edges.count({e.second, e.first}), 1u);  // each edge once each way
 }
+
+TEST(Quad, FoldedQuadOnAFeatureIsUntangled) {
+  // The box's grid with one vertex of a box edge slid along that edge past its neighbour: the
+  // quads on both sides fold. Feature vertices normally stay put; those of folded quads move, and
+  // the smoothing unfolds them.
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
+  const TetMesh tm = tet_mesh_of(s.V, s.F);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  hex::HexOptions o;
+  o.cells_per_unit = 4;
+  o.pillow = "off";
+  o.smooth_iterations = 0;
+  hex::HexResult h = hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
+  int moved = -1;
+  for (int v = 0; v < h.V.rows() && moved < 0; ++v)
+    if ((h.V.row(v) - Eigen::RowVector3d(0, 0, 1.5)).norm() < 1e-9) moved = v;
+  ASSERT_GE(moved, 0);
+  h.V(moved, 2) = 1.5 + 0.4;  // beyond its neighbour at z = 1.75, still on the edge x = y = 0
+  const quad::QuadResult before = quad::quad_mesh_from_hexes(h.V, h.H, s, quad::QuadOptions{0});
+  EXPECT_GT(before.quality.inverted, 0);
+  const quad::QuadResult q = quad::quad_mesh_from_hexes(h.V, h.H, s);
+  EXPECT_EQ(q.quality.inverted, 0);
+  EXPECT_GT(q.quality.sj_min, 0.5);
+}

@@ -625,17 +625,28 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hex::HexOptions ho = opt.hex;
         ho.pillow = "off";
         ho.smooth_iterations = 0;
+        bool report_grid_optimized = false;
         if (opt.target_quads > 0) {
           double area = 0;
           for (int f = 0; f < B.rows(); ++f)
             area += 0.5 * (rr.X.row(B(f, 1)) - rr.X.row(B(f, 0))).cross(rr.X.row(B(f, 2)) - rr.X.row(B(f, 0))).norm();
           ho.cells_per_unit = std::sqrt(opt.target_quads / area);
         }
-        const hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
-        const quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
+        quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+        if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
+          // Grid faces straddling a sharp edge the polycube has no edge along can fold when
+          // projected: untangle the grid with the hex optimization (boundary kept on the surface
+          // and its features) and take its boundary.
+          hooks.info(std::to_string(qr.quality.inverted) + " quads fold on the projected grid; optimizing the grid first");
+          ho.smooth_iterations = opt.hex.smooth_iterations;
+          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
+          qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+          report_grid_optimized = true;
+        }
         if (qr.quality.inverted > 0)
           throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
-                                               " quads are folded or degenerate after smoothing (min scaled Jacobian " +
+                                               " quads are folded or degenerate (min scaled Jacobian " +
                                                std::to_string(qr.quality.sj_min) + "); try another --quads");
         MeshData qm;
         qm.V = qr.V;
@@ -663,7 +674,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"hausdorff_rel", hd.max / box.diagonal().norm()},
                           {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
                           {"smooth_moves", qr.smooth_moves},
-                          {"grid", {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping}}},
+                          {"grid", {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
+                                    {"optimized", report_grid_optimized}}},
                           {"seconds", sq.seconds()}};
         report["timings"]["quad"] = sq.seconds();
         hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +

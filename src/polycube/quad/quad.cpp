@@ -10,6 +10,13 @@
 
 namespace polycube::quad {
 
+namespace {
+/// Quads worse than this may move their vertices off their smooth patch (as in hex/optimize).
+constexpr double kCrossPatchBelow = 0.3;
+/// Feature vertices of quads worse than this move too (a folded or nearly flat quad on a feature).
+constexpr double kFreeFeatureBelow = 0.1;
+}  // namespace
+
 double scaled_jacobian(const std::array<Vec3, 4>& p) {
   std::array<Vec3, 4> e, nrm;
   for (int i = 0; i < 4; ++i) e[i] = p[(i + 1) % 4] - p[i];
@@ -104,7 +111,12 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
     hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
     int moves = 0;
     for (int v = 0; v < n; ++v) {
-      if (fixed[v] || nb[v].empty()) continue;
+      if (nb[v].empty()) continue;
+      // A feature vertex stays, unless one of its quads is folded or nearly flat: then it may move,
+      // and like the vertices of poor quads (< kCrossPatchBelow) it may leave its patch.
+      const double before = worst(v);
+      if (fixed[v] && before > kFreeFeatureBelow) continue;
+      const bool cross = before < kCrossPatchBelow;
       Vec3 c = Vec3::Zero();
       for (int u : nb[v]) c += r.V.row(u).transpose();
       c /= static_cast<double>(nb[v].size());
@@ -114,9 +126,9 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
         nrm += (cc - a).cross(d - b);
       }
       const Vec3 x = r.V.row(v).transpose();
-      const double before = worst(v);
       for (double t : {1.0, 0.5, 0.25}) {
-        const Vec3 p = tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
+        const Vec3 p = cross ? tree.closest(x + t * (c - x), &nrm).point
+                             : tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
         r.V.row(v) = p.transpose();
         const double after = worst(v);
         if (after > before + 1e-9 || (after >= before && after > 0.3)) {
