@@ -35,16 +35,40 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
        ++attempt) {
     const MatX3d& X = e.realized.X;
     const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
-    std::vector<int> next = e.labels;
-    int changed = 0;
+    // Misoriented triangles, relabelled by fronts from the others: each takes the most frequent
+    // label, other than its own, of its settled neighbours (a folded strip is relabelled whole).
+    std::vector<char> bad(B.rows(), 0);
+    int nbad = 0;
     for (int f = 0; f < B.rows(); ++f) {
       const Vec3 a = X.row(B(f, 0)), b = X.row(B(f, 1)), c = X.row(B(f, 2));
       if ((b - a).cross(c - a).dot(label_direction(e.labels[f])) > 1e-14 * diag * diag) continue;
-      int votes[6] = {0, 0, 0, 0, 0, 0};
-      for (int k = 0; k < 3; ++k)
-        if (N(f, k) >= 0 && e.labels[N(f, k)] != e.labels[f]) votes[e.labels[N(f, k)]]++;
-      const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
-      if (votes[best] > 0) next[f] = best, ++changed;
+      bad[f] = 1;
+      ++nbad;
+      hooks.debug("misoriented triangle " + std::to_string(f) + " (" + std::to_string(B(f, 0)) + " " +
+                  std::to_string(B(f, 1)) + " " + std::to_string(B(f, 2)) + ") label " + label_name(e.labels[f]) +
+                  ", area " + std::to_string(0.5 * (b - a).cross(c - a).norm()));
+    }
+    std::vector<int> next = e.labels;
+    int changed = 0;
+    for (bool progress = true; progress;) {
+      progress = false;
+      std::vector<std::pair<int, int>> set;
+      for (int f = 0; f < B.rows(); ++f) {
+        if (bad[f] != 1) continue;
+        int votes[6] = {0, 0, 0, 0, 0, 0};
+        for (int k = 0; k < 3; ++k) {
+          const int g = N(f, k);
+          if (g >= 0 && bad[g] != 1 && next[g] != e.labels[f]) votes[next[g]]++;
+        }
+        const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
+        if (votes[best] > 0) set.emplace_back(f, best);
+      }
+      for (auto [f, l] : set) {
+        next[f] = l;
+        bad[f] = 2;
+        ++changed;
+        progress = true;
+      }
     }
     if (changed == 0) break;
     e.labels = std::move(next);
