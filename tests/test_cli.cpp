@@ -405,3 +405,22 @@ TEST(Cli, ConstraintGroupsComeFromTheInputFile) {
   EXPECT_EQ(r.code, 2) << r.output;
   EXPECT_NE(r.output.find("group 'nose'"), std::string::npos) << r.output;
 }
+
+TEST(Cli, FeatureConstraintsFollowTheRemeshedSurface) {
+  // The remeshed surface has new vertices: each input feature edge maps to the boundary edges
+  // lying on it (one deformation step is enough to check the mapping).
+  const std::string out = temp_dir("cli_features_remeshed");
+  RunResult r = run_cli("--example chamfer_box --edge-length 0.05 --features auto --until deform --alpha-steps 1 -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json c = report(out)["constraints"];
+  EXPECT_EQ(c["count"], 15);
+  EXPECT_EQ(c["unmapped_constraints"], 0);
+  // At least one boundary edge per feature curve, and more than the input had on each curve.
+  int input_edges = 0;
+  for (const auto& e : c["per_constraint"]) {
+    EXPECT_GE(e["edges"].get<int>(), 1) << e.dump();
+    input_edges += e["input_edges"].get<int>();
+  }
+  EXPECT_GE(c["edges"].get<int>(), 15);
+  EXPECT_GT(input_edges, 0);
+}

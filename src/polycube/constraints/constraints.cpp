@@ -7,6 +7,8 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include <Eigen/Geometry>
+
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/geometry/features.h"
@@ -196,25 +198,39 @@ Mapped map_to_boundary(const std::vector<Constraint>& cs, const SurfaceMesh& s, 
     const double omega = c.weight > 0 ? c.weight : opt.weight;
     const auto edges = constraint_edges(c, s, ci);
     std::set<int> got;
+    std::vector<std::array<int, 2>> missing;  // input edges that are not boundary edges
     for (const auto& e : edges) {
       const int u = find(e[0]), w = find(e[1]);
-      if (u >= 0 && w >= 0) {
-        auto it = pair_of.find(sorted_edge(u, w));
-        if (it != pair_of.end()) {
-          got.insert(it->second);
-          continue;
-        }
+      auto it = u >= 0 && w >= 0 ? pair_of.find(sorted_edge(u, w)) : pair_of.end();
+      if (it != pair_of.end()) got.insert(it->second);
+      else missing.push_back(e);
+    }
+    if (!missing.empty()) {
+      // Remeshed: the boundary edges whose ends and midpoint lie on the polyline of the missing
+      // input edges (a new edge may span several input edges), within 1% of their mean length.
+      Eigen::AlignedBox3d box;
+      double mean_len = 0;
+      for (const auto& e : missing) {
+        box.extend(s.V.row(e[0]).transpose());
+        box.extend(s.V.row(e[1]).transpose());
+        mean_len += (s.V.row(e[0]) - s.V.row(e[1])).norm();
       }
-      // Remeshed: the boundary edges lying on the segment.
-      const Vec3 a = s.V.row(e[0]), b = s.V.row(e[1]), ab = b - a;
-      const double len2 = ab.squaredNorm(), tol = 0.01 * std::sqrt(len2);
-      auto on_segment = [&](int v) {
-        const Vec3 p = V.row(v);
-        const double t = std::clamp((p - a).dot(ab) / len2, 0.0, 1.0);
-        return (a + t * ab - p).norm() <= tol;
+      const double tol = 0.01 * mean_len / static_cast<double>(missing.size());
+      box.min().array() -= tol;
+      box.max().array() += tol;
+      auto on_polyline = [&](const Vec3& p) {
+        if (!box.contains(p)) return false;
+        for (const auto& e : missing) {
+          const Vec3 a = s.V.row(e[0]), ab = Vec3(s.V.row(e[1])) - a;
+          const double t = std::clamp((p - a).dot(ab) / std::max(ab.squaredNorm(), 1e-300), 0.0, 1.0);
+          if ((a + t * ab - p).norm() <= tol) return true;
+        }
+        return false;
       };
-      for (const auto& [key, p] : pair_of)
-        if (on_segment(key[0]) && on_segment(key[1])) got.insert(p);
+      for (const auto& [key, p] : pair_of) {
+        const Vec3 a = V.row(key[0]), b = V.row(key[1]);
+        if (on_polyline(a) && on_polyline(b) && on_polyline(0.5 * (a + b))) got.insert(p);
+      }
     }
     m.input_edges.push_back(static_cast<int>(edges.size()));
     m.mapped_edges.push_back(static_cast<int>(got.size()));

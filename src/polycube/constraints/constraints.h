@@ -74,8 +74,9 @@ struct Mapped {
 
 /// Maps the constraints on surface s to the boundary B of a tet mesh over V. A surface edge whose
 /// end positions are boundary vertices joined by a boundary edge maps to that edge (the
-/// tetrahedralization kept the surface); otherwise (remeshed surface) to the boundary edges whose
-/// two ends lie on the segment, within 1% of its length.
+/// tetrahedralization kept the surface); the others (remeshed surface) map to the boundary edges
+/// whose ends and midpoint lie on their polyline, within 1% of their mean length (a new edge may
+/// span several input edges).
 Mapped map_to_boundary(const std::vector<Constraint>& c, const SurfaceMesh& s, const MatX3d& V, const MatX3i& B,
                        const std::vector<deform::FacePair>& pairs, const ConstraintOptions& opt = {});
 
