@@ -71,8 +71,13 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       }
     }
     if (changed == 0) break;
+    const CleanupStats again = cleanup_labels(deformed, B, next, opt.cleanup);
+    if (next == e.labels) {
+      // The cleanup undid the relabelling (e.g. the triangles were zigzags): nothing new to try.
+      hooks.debug("relabelling the misoriented triangles is undone by the cleanup; no retry");
+      break;
+    }
     e.labels = std::move(next);
-    const CleanupStats again = cleanup_labels(deformed, B, e.labels, opt.cleanup);
     e.cleanup.zigzags += again.zigzags;
     e.cleanup.degenerate += again.degenerate;
     e.cleanup.degree1 += again.degree1;
