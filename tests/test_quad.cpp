@@ -9,6 +9,19 @@
 using namespace polycube;
 using namespace polycube::test;
 
+namespace {
+// The grid of a box taken as its own polycube, 4 cells per unit, no pillow, no smoothing.
+hex::HexResult grid_of_box(const SurfaceMesh& s) {
+  const TetMesh tm = tet_mesh_of(s.V, s.F);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  hex::HexOptions o;
+  o.cells_per_unit = 4;
+  o.pillow = "off";
+  o.smooth_iterations = 0;
+  return hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
+}
+}  // namespace
+
 TEST(Quad, ScaledJacobianKnownValues) {
   std::array<Vec3, 4> sq = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0, 1, 0)};
   EXPECT_NEAR(quad::scaled_jacobian(sq), 1.0, 1e-15);
@@ -35,13 +48,7 @@ TEST(Quad, BoxGivesARegularQuadMeshWithEightIrregularVertices) {
   // 1 x 2 x 3 box at 4 cells per unit: 2 (4*8 + 8*12 + 4*12) = 352 squares, every scaled Jacobian
   // 1, valence 3 only at the 8 corners, closed, facing outward.
   const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
-  const TetMesh tm = tet_mesh_of(s.V, s.F);
-  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
-  hex::HexOptions o;
-  o.cells_per_unit = 4;
-  o.pillow = "off";
-  o.smooth_iterations = 0;
-  const hex::HexResult h = hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
+  const hex::HexResult h = grid_of_box(s);
   const quad::QuadResult q = quad::quad_mesh_from_hexes(h.V, h.H, s);
   ASSERT_EQ(q.Q.rows(), 352);
   EXPECT_EQ(q.V.rows(), 352 + 2);  // Euler: V - E + F = 2 with E = 2F
@@ -67,13 +74,7 @@ TEST(Quad, FoldedQuadOnAFeatureIsUntangled) {
   // quads on both sides fold. Feature vertices normally stay put; those of folded quads move, and
   // the smoothing unfolds them.
   const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
-  const TetMesh tm = tet_mesh_of(s.V, s.F);
-  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
-  hex::HexOptions o;
-  o.cells_per_unit = 4;
-  o.pillow = "off";
-  o.smooth_iterations = 0;
-  hex::HexResult h = hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
+  hex::HexResult h = grid_of_box(s);
   int moved = -1;
   for (int v = 0; v < h.V.rows() && moved < 0; ++v)
     if ((h.V.row(v) - Eigen::RowVector3d(0, 0, 1.5)).norm() < 1e-9) moved = v;
