@@ -45,9 +45,7 @@ TetJacobian tet_jacobian(const MatX3d& X, const MatX4i& T, const deform::ArapRes
   r.J = F.determinant();
   if (!gradient || !(r.J > 0)) return r;
   const Eigen::Matrix3d dJdF = r.J * F.inverse().transpose();  // cofactor of F
-  Eigen::Matrix<double, 4, 3> Bm;                               // rows: dF/dx_p
-  Bm.bottomRows<3>() = Di;
-  Bm.row(0) = -Di.colwise().sum();
+  const Eigen::Matrix<double, 4, 3> Bm = deform::shape_gradients(Di);
   for (int p = 0; p < 4; ++p) r.dJ.segment<3>(3 * p) = dJdF * Bm.row(p).transpose();
   return r;
 }
@@ -107,9 +105,7 @@ class Realizer {
     double diag = 0;
     for (int t = 0; t < T_.rows(); ++t) {
       const Eigen::Matrix3d& Di = arap_rest_.Dm_inv[t];
-      Eigen::Matrix<double, 4, 3> Bm;
-      Bm.bottomRows<3>() = Di;
-      Bm.row(0) = -Di.colwise().sum();
+      const Eigen::Matrix<double, 4, 3> Bm = deform::shape_gradients(Di);
       const Eigen::Matrix4d Ke = arap_rest_.w[t] * Bm * Bm.transpose();
       for (int p = 0; p < 4; ++p)
         for (int q = 0; q < 4; ++q) trip.emplace_back(T_(t, p), T_(t, q), Ke(p, q));

@@ -218,10 +218,7 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
       const double delta = 0.5 * (Fm - R).squaredNorm();
       if (per_tet) (*per_tet)[t] = delta;
       E += rest.w[t] * delta;
-      // B: 4 x 3, row p = d F / d x_p (as a row vector multiplying x_p^T).
-      Eigen::Matrix<double, 4, 3> B;
-      B.bottomRows<3>() = Di;
-      B.row(0) = -Di.colwise().sum();
+      const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
       if (g) {
         const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
         for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
@@ -264,9 +261,7 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     if (!grad && !hess) continue;
     // dJ/dF = cof(F) = J F^-T; dF/dx_p = (row p of B) as in arap_energy.
     const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
-    Eigen::Matrix<double, 4, 3> B;
-    B.bottomRows<3>() = Di;
-    B.row(0) = -Di.colwise().sum();
+    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
     Eigen::Matrix<double, 12, 1> dJ;
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * rest.w[t] / J * dJ));
@@ -298,9 +293,7 @@ double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, d
     const Eigen::Matrix3d dEdF = rest.w[t] / scale *
                                  ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) +
                                   theta * ((2 * D - g * dchi) / chi) * cof);
-    Eigen::Matrix<double, 4, 3> B;
-    B.bottomRows<3>() = Di;
-    B.row(0) = -Di.colwise().sum();
+    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
     Eigen::Matrix<double, 12, 1> ge;
     for (int p = 0; p < 4; ++p) ge.segment<3>(3 * p) = dEdF * B.row(p).transpose();
     scatter_grad<12>(*grad, v, ge);

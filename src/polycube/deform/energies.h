@@ -51,6 +51,15 @@ double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Ei
 /// Exact (non-smoothed) l1 energy sum_f |N_f|_1 and total area sum_f |N_f|.
 void l1_measure(const MatX3d& X, const MatX3i& F, double& l1, double& area);
 
+/// Gradients of a tet's deformation gradient F = Ds Dm^-1 with respect to its vertices: row p is
+/// d F / d x_p (as a row vector multiplying x_p^T); rows 1-3 are Dm^-1, row 0 minus their sum.
+inline Eigen::Matrix<double, 4, 3> shape_gradients(const Eigen::Matrix3d& Dm_inv) {
+  Eigen::Matrix<double, 4, 3> B;
+  B.bottomRows<3>() = Dm_inv;
+  B.row(0) = -Dm_inv.colwise().sum();
+  return B;
+}
+
 /// Precomputed rest-state data for ARAP.
 struct ArapRest {
   std::vector<Eigen::Matrix3d> Dm_inv;  ///< inverse rest edge matrix per tet
