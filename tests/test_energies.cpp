@@ -139,6 +139,74 @@ TEST(Energies, ArapGradientHessianAndZeroAtRest) {
   EXPECT_NEAR(E(1.5 * s.X0, nullptr, nullptr), 0.7 * 0.5 * 3 * 0.25, 1e-12);
 }
 
+TEST(Energies, SurfaceArapGradientHessianAndZeroAtRest) {
+  Small s = small_mesh();
+  SurfaceArapRest rest = SurfaceArapRest::build(s.X0, s.F);
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return surface_arap_energy(X, s.F, rest, 0.7, g, H);
+  };
+  expect_gradient(E, s.X);
+  expect_psd(hessian(E, s.X));
+  EXPECT_NEAR(E(s.X0, nullptr, nullptr), 0, 1e-14);
+  Eigen::Matrix3d R = Eigen::AngleAxisd(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  MatX3d Xr = (s.X0 * R.transpose()).rowwise() + Eigen::RowVector3d(3, -1, 2);
+  EXPECT_NEAR(E(Xr, nullptr, nullptr), 0, 1e-14);
+  // Uniform scaling by s: delta = 0.5 * 2 (s-1)^2 for every triangle (two singular values).
+  EXPECT_NEAR(E(1.5 * s.X0, nullptr, nullptr), 0.7 * 0.5 * 2 * 0.25, 1e-12);
+  // Stretching a unit right triangle in the plane by 2 along x: singular values 2 and 1.
+  MatX3d T0(3, 3), T1(3, 3);
+  T0 << 0, 0, 0, 1, 0, 0, 0, 1, 0;
+  T1 << 0, 0, 0, 2, 0, 0, 0, 1, 0;
+  MatX3i F1(1, 3);
+  F1 << 0, 1, 2;
+  SurfaceArapRest r1 = SurfaceArapRest::build(T0, F1);
+  EXPECT_NEAR(surface_arap_energy(T1, F1, r1, 1.0, nullptr, nullptr), 0.5, 1e-12);
+  // Bending: two triangles of a unit square folded by 90 degrees along their diagonal keep every
+  // edge length, so one rotation per triangle would cost nothing; shared vertex rotations do.
+  MatX3d Q0(4, 3), Q1(4, 3);
+  Q0 << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  MatX3i F2(2, 3);
+  F2 << 0, 1, 2, 0, 2, 3;
+  const Vec3 d = Vec3(1, 1, 0).normalized(), m(0.5, 0.5, 0);
+  Q1 = Q0;
+  Q1.row(3) = (m + (Vec3(0, 1, 0) - m).dot(Vec3(-1, 1, 0).normalized()) * Vec3(0, 0, 1)).transpose();
+  EXPECT_NEAR((Q1.row(3) - Q1.row(0)).norm(), 1.0, 1e-12);
+  SurfaceArapRest r2 = SurfaceArapRest::build(Q0, F2);
+  EXPECT_GT(surface_arap_energy(Q1, F2, r2, 1.0, nullptr, nullptr), 0.01);
+  (void)d;
+}
+
+TEST(Energies, BorderL1GradientPsdAndKnownValues) {
+  // An open strip: the two triangles of a square, border = its 4 sides.
+  MatX3i F(2, 3);
+  F << 0, 1, 2, 0, 2, 3;
+  const auto edges = border_edges(F);
+  ASSERT_EQ(edges.size(), 4u);
+  EXPECT_TRUE(border_edges(small_mesh().F).empty());
+  MatX3d X(4, 3);
+  X << 0, 0, 0, 1, 0.1, 0.2, 1.1, 0.9, -0.1, -0.2, 1.2, 0.3;
+  for (double eps : {0.5, 0.01}) {
+    EnergyFn E = [&](const MatX3d& Y, Eigen::VectorXd* g, HessianSink* H) {
+      return border_l1_energy(Y, edges, 0.8, eps, 1.3, g, H);
+    };
+    expect_gradient(E, X);
+    expect_psd(hessian(E, X));
+  }
+  // Axis-aligned square, any size and smoothing: zero.
+  MatX3d S(4, 3);
+  S << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  for (double eps : {0.0, 0.1}) {
+    EXPECT_NEAR(border_l1_energy(S, edges, 2.0, eps, 1.0, nullptr, nullptr), 0, 1e-12);
+    EXPECT_NEAR(border_l1_energy(3.0 * S, edges, 2.0, eps, 1.0, nullptr, nullptr), 0, 1e-12);
+  }
+  // Rotated by 45 degrees in its plane: each side |e|_1 - |e| = sqrt(2) - 1; h scales it.
+  MatX3d S2(4, 3);
+  const double c = std::sqrt(0.5);
+  S2 << 0, 0, 0, c, c, 0, 0, 2 * c, 0, -c, c, 0;
+  EXPECT_NEAR(border_l1_energy(S2, edges, 0.5, 0.0, 1.0, nullptr, nullptr), 0.5 * 4 * (std::sqrt(2.0) - 1), 1e-12);
+  EXPECT_GT(border_l1_energy(S2, edges, 0.5, 0.1, 1.0, nullptr, nullptr), 0);
+}
+
 TEST(Energies, VolumeBarrierGradientAndPsd) {
   Small s = small_mesh();
   ArapRest rest = ArapRest::build(s.X0, s.T);

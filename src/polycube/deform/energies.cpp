@@ -246,6 +246,130 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
   return weight * (E1 + E2);
 }
 
+SurfaceArapRest SurfaceArapRest::build(const MatX3d& X, const MatX3i& F) {
+  SurfaceArapRest r;
+  r.grad.resize(F.rows());
+  r.normal.resize(F.rows());
+  r.w.resize(F.rows());
+  double total = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 e1 = row(X, F(f, 1)) - row(X, F(f, 0)), e2 = row(X, F(f, 2)) - row(X, F(f, 0));
+    const Vec3 n = e1.cross(e2);
+    const double a2 = n.norm();
+    Eigen::Matrix<double, 3, 2> Dm;
+    Dm << e1, e2;
+    Eigen::Matrix3d G = Eigen::Matrix3d::Zero();
+    if (a2 > 0) {
+      const Eigen::Matrix<double, 2, 3> pinv = (Dm.transpose() * Dm).inverse() * Dm.transpose();
+      G.row(1) = pinv.row(0);
+      G.row(2) = pinv.row(1);
+      G.row(0) = -(G.row(1) + G.row(2));
+    }
+    r.grad[f] = G;
+    r.normal[f] = a2 > 0 ? Vec3(n / a2) : Vec3::Zero();
+    r.w[f] = 0.5 * a2;
+    total += r.w[f];
+  }
+  for (double& w : r.w) w /= total > 0 ? total : 1.0;
+  return r;
+}
+
+double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
+                           Eigen::VectorXd* grad, HessianSink* hess, std::vector<double>* per_face) {
+  if (per_face) per_face->assign(F.rows(), 0.0);
+  // Jacobians F_t = sum_p x_p g_p^T (3 x 3, zero on the rest normal), then per vertex the rotation
+  // closest to the area-weighted sum of its triangles' Jacobians.
+  const int nf = static_cast<int>(F.rows());
+  std::vector<Eigen::Matrix3d> J(nf);
+  int nv = 0;
+  for (int f = 0; f < nf; ++f) nv = std::max(nv, F.row(f).maxCoeff() + 1);
+  std::vector<Eigen::Matrix3d> S(nv, Eigen::Matrix3d::Zero());
+  for (int f = 0; f < nf; ++f) {
+    J[f].setZero();
+    for (int p = 0; p < 3; ++p) J[f] += row(X, F(f, p)) * rest.grad[f].row(p);
+    for (int p = 0; p < 3; ++p) S[F(f, p)] += rest.w[f] * J[f];
+  }
+  std::vector<Eigen::Matrix3d> R(nv);
+  for (int v = 0; v < nv; ++v) R[v] = closest_rotation(S[v]);
+  double E = 0;
+  for (int f = 0; f < nf; ++f) {
+    const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - rest.normal[f] * rest.normal[f].transpose();
+    double delta = 0;
+    Eigen::Matrix3d Rbar = Eigen::Matrix3d::Zero();
+    for (int p = 0; p < 3; ++p) {
+      delta += (0.5 / 3.0) * (J[f] - R[F(f, p)] * P).squaredNorm();
+      Rbar += R[F(f, p)] / 3.0;
+    }
+    if (per_face) (*per_face)[f] = delta;
+    E += rest.w[f] * delta;
+    const Eigen::Matrix3d& G = rest.grad[f];
+    if (grad) {
+      // Each R_i minimizes its own terms, so the gradient holds them fixed (envelope theorem).
+      const Eigen::Matrix3d D = J[f] - Rbar * P;
+      for (int p = 0; p < 3; ++p) grad->segment<3>(3 * F(f, p)) += weight * rest.w[f] * D * G.row(p).transpose();
+    }
+    if (hess) {
+      const Eigen::Matrix3d K = G * G.transpose();
+      Eigen::Matrix<double, 9, 9> H = Eigen::Matrix<double, 9, 9>::Zero();
+      for (int p = 0; p < 3; ++p)
+        for (int q = 0; q < 3; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
+      const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
+      hess->add(v, 3, weight * rest.w[f] * H);
+    }
+  }
+  return weight * E;
+}
+
+double border_l1_energy(const MatX3d& X, const std::vector<std::array<int, 2>>& edges, double h, double eps,
+                        double weight, Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  const double ceps = std::sqrt(1 + eps) + 2 * std::sqrt(eps);
+  for (const auto& ab : edges) {
+    const Vec3 e = row(X, ab[1]) - row(X, ab[0]);
+    const double e2 = e.squaredNorm();
+    Vec3 dg = Vec3::Zero();
+    Eigen::Matrix3d Hg = Eigen::Matrix3d::Zero();
+    for (int k = 0; k < 3; ++k) {
+      const double s = std::sqrt(e[k] * e[k] + eps * e2);
+      E += s;
+      if (s <= 0 || (!grad && !hess)) continue;
+      Vec3 q = eps * e;
+      q[k] += e[k];
+      dg += q / s;
+      Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
+      M(k, k) += 1;
+      Hg += M / s - q * q.transpose() / (s * s * s);
+    }
+    // Minus c_eps |e|, the value for an axis-aligned edge: zero when aligned, and shrinking the
+    // border no longer pays. Its Hessian (negative) is left out of the approximation.
+    const double len = std::sqrt(e2);
+    E -= ceps * len;
+    if (len > 0) dg -= ceps * e / len;
+    const double c = weight * h;
+    if (grad) {
+      grad->segment<3>(3 * ab[0]) -= c * dg;
+      grad->segment<3>(3 * ab[1]) += c * dg;
+    }
+    if (hess) {
+      Eigen::Matrix<double, 6, 6> H;
+      H << Hg, -Hg, -Hg, Hg;
+      const int v[2] = {ab[0], ab[1]};
+      hess->add(v, 2, c * H);
+    }
+  }
+  return weight * h * E;
+}
+
+std::vector<std::array<int, 2>> border_edges(const MatX3i& F) {
+  std::map<std::pair<int, int>, int> count;
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) ++count[{F(f, k), F(f, (k + 1) % 3)}];
+  std::vector<std::array<int, 2>> out;
+  for (const auto& [e, n] : count)
+    if (!count.count({e.second, e.first})) out.push_back({e.first, e.second});
+  return out;
+}
+
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
                              Eigen::VectorXd* grad, HessianSink* hess) {
   double E = 0;

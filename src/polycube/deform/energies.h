@@ -72,6 +72,41 @@ struct ArapRest {
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
                    HessianSink* hess, std::vector<double>* per_tet = nullptr);
 
+/// Rest-state data for the surface ARAP distortion (surface mode).
+struct SurfaceArapRest {
+  /// Per triangle, row p: g_p, with F_t = sum_p x_p g_p^T the 3 x 3 Jacobian of the affine map
+  /// from the rest triangle (zero on its normal): rows 1-2 the pseudo-inverse of the rest edges.
+  std::vector<Eigen::Matrix3d> grad;
+  std::vector<Vec3> normal;  ///< rest unit normal per triangle
+  std::vector<double> w;     ///< rest area / total rest area
+  static SurfaceArapRest build(const MatX3d& X_rest, const MatX3i& F);
+};
+
+/// Surface ARAP distortion with one rotation per vertex (Sorkine and Alexa 2007, in the per-triangle
+/// form of Chao et al. 2010's "spokes and rims"):
+///   sum_t w_t sum_{i in t} (1/3) 0.5 |F_t - R_i P_t|_F^2,
+/// P_t the projector on the rest triangle's plane, R_i the rotation closest to sum_{t ni i} w_t F_t.
+/// A rotation shared by the triangles around a vertex resists bending, which a rotation per
+/// triangle would not: with that, a sphere's surface folds into many small steps (16 charts
+/// instead of 6). Gradient exact (each R_i is optimal for its terms); Hessian G^T G (constant,
+/// PSD). `per_face` optionally receives each triangle's delta.
+double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
+                           Eigen::VectorXd* grad, HessianSink* hess, std::vector<double>* per_face = nullptr);
+
+/// Open surfaces (the paper's inset of Section 5.3): smoothed l1 norm of the border edges,
+///   sum_e h [sum_k sqrt(e_k^2 + eps |e|^2) - c_eps |e|],   e = x_b - x_a,
+/// c_eps = sqrt(1 + eps) + 2 sqrt(eps) its value for an axis-aligned unit edge, so each term is
+/// >= 0, zero exactly for axis-aligned edges, and the border gains nothing by shrinking (the plain
+/// l1 norm pulls a border loop together: an open cylinder's ARAP distortion went to 0.3-3).
+/// h is a length (the caller's choice) that gives the term the units of the area-weighted normals
+/// of E1. `edges` are (a, b) vertex pairs. Hessian: the exact Hessian of the first (convex) part,
+/// PSD; the concave -c_eps |e| part is left out.
+double border_l1_energy(const MatX3d& X, const std::vector<std::array<int, 2>>& edges, double h, double eps,
+                        double weight, Eigen::VectorXd* grad, HessianSink* hess);
+
+/// Border edges (a, b) of a triangle set, oriented as in their triangle; empty for a closed surface.
+std::vector<std::array<int, 2>> border_edges(const MatX3i& F);
+
 /// Volume barrier (not in the paper): sum_t w_t * -log(det F_t), w_t the rest volume fraction.
 /// Keeps every tet positively oriented so that the line search is never blocked by a tet that
 /// the SQP direction flattens. +inf for an inverted tet. Hessian: Gauss-Newton, (grad J grad J^T)/J^2.

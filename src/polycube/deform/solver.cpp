@@ -2,6 +2,7 @@
 
 #include <Eigen/SVD>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -71,6 +72,15 @@ struct Problem {
   double area0 = 1;
   const DeformOptions& opt;
   double volume_weight = 0;  // current volume-barrier weight (raised when tets block the line search)
+  // Surface mode (no tets): surface ARAP on B, and the border l1 term of open surfaces.
+  bool surface = false;
+  SurfaceArapRest srest;
+  std::vector<std::array<int, 2>> border;
+  double border_h = 0;  // length weighting the border edges (see border_l1_energy)
+
+  double distortion(const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) const {
+    return surface ? surface_arap_energy(X, B, srest, 1.0, g, H) : arap_energy(X, T, rest, 1.0, g, H);
+  }
 };
 
 struct Energies {
@@ -93,7 +103,8 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
     }
   }
   e.e1 = l1_energy(X, p.B, eps, alpha / p.area0, g, H);
-  e.arap = arap_energy(X, p.T, p.rest, 1.0, g, with_arap_hessian ? H : nullptr);
+  if (!p.border.empty()) e.e1 += border_l1_energy(X, p.border, p.border_h, eps, alpha / p.area0, g, H);
+  e.arap = p.distortion(X, g, with_arap_hessian ? H : nullptr);
   if (p.opt.beta > 0) e.complexity = complexity_energy(X, p.B, p.pairs, p.opt.beta, g, H);
   if (!p.opt.edges.empty()) e.edges = edge_energy(X, p.B, p.pairs, p.opt.edges, 1.0, g, H);
   e.total = e.e1 + e.arap + e.barrier + e.complexity + e.edges + e.volume;
@@ -149,8 +160,9 @@ Eigen::Matrix3d best_rotation(const MatX3d& X, const MatX3i& B, double eps) {
   return closest_rotation(R);
 }
 
-DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
-                                const Hooks& hooks) {
+namespace {
+
+DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt, const Hooks& hooks) {
   Stopwatch clock;
   DeformResult res;
   // Normalize: centred, unit bounding-box diagonal.
@@ -160,9 +172,35 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX3d X = (V.rowwise() - centre) / scale;
   POLYCUBE_ASSERT(!any_inverted(X, T), "the tet mesh given to the deformation has inverted tets");
 
-  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight};
+  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, false, {}, {}, 0};
   double l1 = 0;
   l1_measure(X, B, l1, p.area0);
+  if (T.rows() == 0) {
+    p.surface = true;
+    p.volume_weight = 0;
+    p.srest = SurfaceArapRest::build(X, B);
+    p.border = border_edges(B);
+    if (!p.border.empty()) {
+      double len = 0;
+      for (const auto& e : p.border) len += (X.row(e[1]) - X.row(e[0])).norm();
+      // h: the border edges of a surface of area A and border length L weigh like a band of
+      // width h = weight * A / L along it, so that the term's share does not depend on the resolution.
+      p.border_h = opt.border_weight * p.area0 / std::max(1e-300, len);
+    }
+  }
+  // The schedule's measure: sum|N|_1 / sum|N|_2 - 1 over the normals and, on open surfaces, the
+  // larger of that and the same over the border edges.
+  auto quality = [&](const MatX3d& Y) {
+    double a, s;
+    l1_measure(Y, B, s, a);
+    double b1 = 0, b2 = 0;
+    for (const auto& e : p.border) {
+      const Vec3 d = (Y.row(e[1]) - Y.row(e[0])).transpose();
+      b1 += d.lpNorm<1>();
+      b2 += d.norm();
+    }
+    return std::max(s / a - 1.0, b2 > 0 ? b1 / b2 - 1.0 : 0.0);
+  };
   for (const EdgeConstraint& e : opt.edges)
     POLYCUBE_ASSERT(e.pair >= 0 && e.pair < static_cast<int>(p.pairs.size()), "edge constraint out of range");
 
@@ -170,26 +208,22 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   std::vector<std::vector<int>> elements;
   elements.reserve(T.rows() + p.pairs.size());
   for (int t = 0; t < T.rows(); ++t) elements.push_back({T(t, 0), T(t, 1), T(t, 2), T(t, 3)});
+  if (p.surface)
+    for (int f = 0; f < B.rows(); ++f) elements.push_back({B(f, 0), B(f, 1), B(f, 2)});
   for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
   SparseSystem sys(static_cast<int>(X.rows()), elements);
   sys.cache_elements(elements);
   // The ARAP Hessian G^T G is constant: assemble it once.
   sys.set_zero();
-  arap_energy(X, T, p.rest, 1.0, nullptr, &sys);
+  p.distortion(X, nullptr, &sys);
   const std::vector<double> arap_values = sys.values();
   const double arap_diag = sys.mean_diagonal();
-
-  auto quality = [&](const MatX3d& Y) {
-    double a, s;
-    l1_measure(Y, B, s, a);
-    return s / a - 1.0;
-  };
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0;
   bool factor_valid = false, stalled = false;
   double t_last_factor = 0, t_cg_iteration = 1;
-  double alpha = opt.alpha0, eps = opt.eps0;
+  double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
   double q = quality(X);
@@ -305,7 +339,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
       X = Xt;
       double s1, a1;
       l1_measure(X, B, s1, a1);
-      q = s1 / a1 - 1.0;
+      q = quality(X);
       IterationRecord r;
       r.alpha_step = step;
       r.iteration = total_iterations;
@@ -354,14 +388,36 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   l1_measure(X, B, s1, a1);
   res.l1_quality = s1 / a1 - 1.0;
   res.error_d = (s1 - p.area0) * scale * scale;
-  res.arap = arap_energy(X, T, p.rest, 1.0, nullptr, nullptr);
+  res.arap = p.distortion(X, nullptr, nullptr);
+  if (!p.border.empty()) {
+    double bl1 = 0, bl2 = 0;
+    for (const auto& e : p.border) {
+      const Vec3 d = (X.row(e[1]) - X.row(e[0])).transpose();
+      bl1 += d.lpNorm<1>();
+      bl2 += d.norm();
+    }
+    res.border_quality = bl1 / bl2 - 1.0;
+  }
   res.iterations = total_iterations;
   res.inverted = measure_tets(res.X, T).inverted;
-  res.converged = res.l1_quality < opt.target_quality;
+  res.converged = q < opt.target_quality;
   res.seconds = clock.seconds();
   res.factorizations = factorizations;
   res.volume_barrier_weight = p.volume_weight;
   return res;
+}
+
+}  // namespace
+
+DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
+                                const Hooks& hooks) {
+  POLYCUBE_ASSERT(T.rows() > 0, "deform_to_polycube needs tets (deform_surface_to_polycube for a surface)");
+  return deform(V, T, B, opt, hooks);
+}
+
+DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const DeformOptions& opt,
+                                        const Hooks& hooks) {
+  return deform(V, MatX4i(0, 4), F, opt, hooks);
 }
 
 }  // namespace polycube::deform
