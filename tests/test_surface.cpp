@@ -3,6 +3,7 @@
 #include <cmath>
 #include <map>
 
+#include "polycube/chart/extract.h"
 #include "polycube/chart/labeling.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/solver.h"
@@ -87,4 +88,67 @@ TEST(SurfaceDeform, HemisphereBorderBecomesAxisAligned) {
   EXPECT_LT(r.border_quality, 1e-3);
   EXPECT_EQ(count_charts(r.X, h.F), 5);  // an open box
   EXPECT_LT(r.arap, 0.15);
+}
+
+namespace {
+
+// Surface mode through the polycube stage: deformation, labels, cleanup, realization.
+chart::PolycubeExtraction surface_polycube(const SurfaceMesh& s, const deform::DeformOptions& o = {}) {
+  const auto d = deform::deform_surface_to_polycube(s.V, s.F, o);
+  return chart::extract_polycube(s.V, MatX4i(0, 4), s.F, d.X);
+}
+
+// Every triangle facing its label's direction (no flip) and lying in its chart's plane.
+void expect_exact_polycube(const SurfaceMesh& s, const chart::PolycubeExtraction& e) {
+  ASSERT_TRUE(e.realized.success) << e.realized.failure;
+  EXPECT_LT(e.realized.planarity_error, 1e-12);
+  EXPECT_EQ(e.realized.misoriented_faces, 0);
+  const MatX3d& X = e.realized.X;
+  for (int f = 0; f < s.F.rows(); ++f) {
+    const Vec3 N = deform::area_normal(X, s.F(f, 0), s.F(f, 1), s.F(f, 2));
+    EXPECT_GT(N.dot(chart::label_direction(e.labels[f])), 0) << "triangle " << f;
+  }
+}
+
+}  // namespace
+
+TEST(SurfacePolycube, SphereGivesACube) {
+  const auto s = sphere(4);
+  const auto e = surface_polycube(s);
+  expect_exact_polycube(s, e);
+  EXPECT_EQ(e.charts.charts, 6);
+  EXPECT_EQ(e.charts.corners, 8);
+  EXPECT_LT(e.realized.arap, 0.2);
+  EXPECT_EQ(e.realized.T.rows(), 0);
+}
+
+TEST(SurfacePolycube, TorusGivesAValidGenusOnePolycube) {
+  const auto t = torus(1.0, 0.4, 48, 16);
+  const auto e = surface_polycube(t);
+  expect_exact_polycube(t, e);
+  EXPECT_TRUE(e.charts.valid);
+}
+
+TEST(SurfacePolycube, OpenCylinderKeepsItsBorderAxisAligned) {
+  const auto c = open_cylinder();
+  const auto e = surface_polycube(c);
+  expect_exact_polycube(c, e);
+  EXPECT_EQ(e.charts.charts, 4);
+  // Every border edge runs along exactly one axis.
+  std::vector<std::array<int, 2>> edges;
+  chart::border_directions(e.realized.X, c.F, e.labels, &edges);
+  ASSERT_EQ(edges.size(), 64u);
+  for (const auto& ab : edges) {
+    const Vec3 d = (e.realized.X.row(ab[1]) - e.realized.X.row(ab[0])).transpose();
+    int nonzero = 0;
+    for (int k = 0; k < 3; ++k) nonzero += d[k] != 0;
+    EXPECT_EQ(nonzero, 1);
+  }
+}
+
+TEST(SurfacePolycube, HemisphereGivesAnOpenBox) {
+  const auto h = hemisphere(4);
+  const auto e = surface_polycube(h);
+  expect_exact_polycube(h, e);
+  EXPECT_EQ(e.charts.charts, 5);
 }

@@ -91,6 +91,19 @@ Charts build_charts(const MatX3d& X, const MatX3i& F, const std::vector<int>& la
     }
   c.neighbors.resize(c.count());
   for (int i = 0; i < c.count(); ++i) c.neighbors[i].assign(nb[i].begin(), nb[i].end());
+  c.border_runs.assign(c.count(), 0);
+  for (const auto& loop : border_loops(F)) {
+    const size_t n = loop.size();
+    bool one_chart = true;
+    for (size_t i = 0; i < n; ++i) {
+      const int here = c.of_face[loop[i][2]], before = c.of_face[loop[(i + n - 1) % n][2]];
+      if (here != before) {
+        c.border_runs[here]++;
+        one_chart = false;
+      }
+    }
+    if (one_chart && n > 0) c.border_runs[c.of_face[loop[0][2]]]++;
+  }
   return c;
 }
 
@@ -220,13 +233,13 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       const Charts c = build_charts(X, F, labels);
       int best = -1, best_deg = 4;
       for (int i = 0; i < c.count(); ++i) {
-        const int deg = static_cast<int>(c.neighbors[i].size());
+        const int deg = c.degree(i);
         if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
           best = i;
           best_deg = deg;
         }
       }
-      if (best >= 0 && best_deg >= 1) {
+      if (best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
         // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
         // avoiding the opposite label when another choice exists.
         int to = -1;

@@ -47,6 +47,11 @@ struct Charts {
   std::vector<double> area;                ///< area per chart (on the positions given)
   /// Per chart: (neighbour chart, shared border length), sorted by neighbour id.
   std::vector<std::vector<std::pair<int, double>>> neighbors;
+  /// Open surfaces: per chart, the runs of consecutive border edges it holds (each counts as a
+  /// side of the chart, like a neighbour, in the cleanup's degree); 0 on closed surfaces.
+  std::vector<int> border_runs;
+  /// Degree of a chart for the cleanup: neighbours plus border runs.
+  int degree(int i) const { return static_cast<int>(neighbors[i].size()) + border_runs[i]; }
   int count() const { return static_cast<int>(label.size()); }
 };
 

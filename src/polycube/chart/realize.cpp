@@ -628,6 +628,7 @@ Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4
 
 RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
                                const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
+  if (T_in.rows() == 0) return realize_surface_polycube(rest_in, B, deformed, labels, opt, hooks);
   Stopwatch sw;
   RealizeResult r;
   auto fail = [&](const std::string& why) {

@@ -26,6 +26,7 @@
 // are split at their midpoint first; interior faces whose three vertices lie on one plane, at their
 // centroid (new interior vertices, appended).
 #pragma once
+#include <array>
 #include <string>
 #include <vector>
 
@@ -70,16 +71,38 @@ struct RealizeResult {
   int inverted = 0;              ///< tets with non-positive volume in X
   double planarity_error = 0;    ///< max over boundary triangles of their extent along their label axis / bbox diagonal
   int misoriented_faces = 0;     ///< boundary triangles not facing their label's direction (or of zero area)
-  int planes[3] = {0, 0, 0};     ///< distinct planes per axis
+  int planes[3] = {0, 0, 0};     ///< distinct planes per axis (surface mode: with the border segments' lines)
+  int degenerate_border_edges = 0;  ///< surface mode, open surfaces: border edges of zero length
   double seconds = 0;
 };
 
 /// Realizes the polycube. rest/T/B: the tet mesh and its outward boundary triangles; deformed: the
 /// deformed positions (axis-aligned frame); labels: one per row of B, cleaned (see labeling.h).
-/// Never throws for a geometric failure: returns success = false with the reason.
+/// Never throws for a geometric failure: returns success = false with the reason. T empty: surface
+/// mode (realize_surface_polycube on B).
 RealizeResult realize_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
                                const std::vector<int>& labels, const RealizeOptions& opt = {},
                                const Hooks& hooks = {});
+
+/// Surface mode (no tets, T empty in realize_polycube, which calls this): the same plane
+/// constraints on the triangles (F, labels), by substitution, and on open surfaces one more per
+/// border edge: it runs along one axis (border_directions), so its ends share the third coordinate.
+/// Started from the deformed surface with every plane at its mean height, then local/global
+/// iterations of the surface ARAP energy (deform::surface_arap_energy, one factorization per axis).
+/// Fails (success = false) when a triangle does not face its label's direction or a border edge
+/// has zero length. `isometric` is over the triangles; `T` is empty.
+RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& deformed,
+                                       const std::vector<int>& labels, const RealizeOptions& opt = {},
+                                       const Hooks& hooks = {});
+
+/// Open surfaces: the axis each border edge runs along in the polycube (the dominant axis of the
+/// deformed edge other than its chart's axis, then single-edge zigzags straightened), in the
+/// order of `edges` (filled: border edges (a, b) loop by loop, oriented as in their triangle).
+std::vector<int> border_directions(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels,
+                                   std::vector<std::array<int, 2>>* edges);
+
+/// Isometric distortion max(s1, 1/s2) of the map between triangles (rest -> X).
+Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, const MatX3i& F);
 
 /// Isometric distortion statistics of the map rest -> X over tets T.
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);

@@ -1,5 +1,7 @@
 #include "polycube/core/topology.h"
 
+#include <map>
+
 #include <algorithm>
 #include <array>
 
@@ -61,6 +63,28 @@ std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pa
   }
   for (auto& l : nb) std::sort(l.begin(), l.end());
   return nb;
+}
+
+std::vector<std::vector<std::array<int, 3>>> border_loops(const MatX3i& F) {
+  std::map<std::pair<int, int>, int> half;
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) half[{F(f, k), F(f, (k + 1) % 3)}] = f;
+  std::map<int, std::array<int, 3>> next;  // border edges by start vertex
+  for (const auto& [e, f] : half)
+    if (!half.count({e.second, e.first})) next[e.first] = {e.first, e.second, f};
+  std::vector<std::vector<std::array<int, 3>>> loops;
+  while (!next.empty()) {
+    std::vector<std::array<int, 3>> loop;
+    auto it = next.begin();
+    while (it != next.end()) {
+      loop.push_back(it->second);
+      const int b = it->second[1];
+      next.erase(it);
+      it = next.find(b);
+    }
+    loops.push_back(std::move(loop));
+  }
+  return loops;
 }
 
 }  // namespace polycube

@@ -1,5 +1,6 @@
 // Connectivity helpers over the plain arrays of types.h.
 #pragma once
+#include <array>
 #include <numeric>
 #include <utility>
 #include <vector>
@@ -22,6 +23,10 @@ struct UnionFind {
 /// Triangle adjacency of an oriented triangle mesh: N(f, k) is the triangle across edge
 /// (F(f,k), F(f,(k+1)%3)), found as the triangle holding the reversed edge; -1 on open edges.
 MatX3i face_adjacency(const MatX3i& F);
+
+/// Border loops of an oriented triangle mesh (edges without a reversed twin), each as its edges
+/// (a, b, face) in order, b of one edge = a of the next; empty for a closed mesh.
+std::vector<std::vector<std::array<int, 3>>> border_loops(const MatX3i& F);
 
 /// Unique undirected edges (a < b), sorted, of triangles or tets (`cols` = 3 or 4 vertices per row).
 std::vector<std::pair<int, int>> unique_edges(const Eigen::Ref<const Eigen::Matrix<int, Eigen::Dynamic, Eigen::Dynamic,

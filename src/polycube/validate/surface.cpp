@@ -231,6 +231,7 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
     if (n) refuse(m, std::to_string(n) + " non-manifold vertices (vertex ids are 0-based):", bad, n, opt.max_listed);
   }
   // 8. Open boundaries: chain the boundary edges into loops.
+  std::vector<int> loop_start;  // first vertex of each loop
   {
     std::multimap<int, int> out;  // boundary half-edge a -> b, in face order
     for (auto [b, e] : groups)
@@ -241,6 +242,7 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
       }
     if (!out.empty()) {
       rep.closed = false;
+      rep.border_edges = static_cast<int>(out.size());
       std::vector<std::string> loops;
       size_t nedges = out.size();
       while (!out.empty()) {
@@ -262,10 +264,13 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
         std::ostringstream os;
         os << " (starts at " << p.x() << ", " << p.y() << ", " << p.z() << ")";
         loops.push_back(s + os.str());
+        loop_start.push_back(start);
       }
-      refuse(m,
+      rep.border_loops = static_cast<int>(loops.size());
+      if (!opt.allow_open)
+        refuse(m,
              "surface is not closed: " + std::to_string(nedges) + " boundary edges in " + std::to_string(loops.size()) +
-                 " open loops (a volume needs a closed surface; fill the holes first):",
+                 " open loops (a volume needs a closed surface: fill the holes first, or use --surface for a surface polycube and quads):",
              loops, loops.size(), opt.max_listed);
     }
   }
@@ -333,9 +338,11 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
     for (int f = 0; f < nf; ++f)
       for (int k = 0; k < 3; ++k) vc[m.F(f, k)] = layout.component_of_face[f];
     for (int v = 0; v < nv; ++v) nvc[vc[v]]++;
+    std::vector<int> loops_of(nc, 0);
+    for (int v : loop_start) loops_of[vc[v]]++;
     for (int c = 0; c < nc; ++c) {
       int chi = nvc[c] - ne[c] + static_cast<int>(comp_faces[c].size());
-      layout.genus[c] = (2 - chi) / 2;
+      layout.genus[c] = (2 - chi - loops_of[c]) / 2;
     }
   }
   const Vec3 center = m.V.colwise().mean();
@@ -347,6 +354,11 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
       vol += a.dot(b.cross(d)) / 6.0;
     }
     layout.volume[c] = vol;
+  }
+  if (!rep.closed) {  // open surfaces (allow_open): no inside, no nesting; orientation as given
+    rep.components = nc;
+    for (int g : layout.genus) rep.genus += g;
+    return rep;
   }
   if (nc > 1) {
     std::vector<std::vector<char>> inside(nc, std::vector<char>(nc, 0));

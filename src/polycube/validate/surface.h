@@ -2,7 +2,7 @@
 //
 // Refused (Error(InvalidMesh) naming the elements): NaN/inf coordinates, degenerate faces (repeated
 // vertex or zero area), duplicate faces, non-manifold edges and vertices, open boundaries (the loops
-// are listed), non-orientable components. Repaired and reported: unreferenced vertices (removed),
+// are listed; accepted with allow_open), non-orientable components. Repaired and reported: unreferenced vertices (removed),
 // inconsistent orientation (faces flipped), components facing the wrong way (reversed so that every
 // component bounds the solid with outward normals; cavities face into the cavity).
 // Several components and any genus are allowed.
@@ -20,6 +20,10 @@ struct ValidateOptions {
   double degenerate_area_rel = 1e-12;
   /// How many offending elements an error message lists.
   int max_listed = 10;
+  /// Accept open boundaries (surface mode): the border loops are counted instead of refused, the
+  /// majority orientation of an open component is kept (it has no inside), and the genus of a
+  /// component with b border loops is (2 - chi - b) / 2.
+  bool allow_open = false;
 };
 
 /// Connected components of a valid closed surface and how they nest.
@@ -35,6 +39,8 @@ struct SurfaceLayout {
 struct SurfaceReport {
   int vertices = 0, triangles = 0, components = 0, genus = 0;
   bool closed = true;
+  int border_loops = 0;           ///< open boundary loops (allow_open only; otherwise refused)
+  int border_edges = 0;
   int unreferenced_removed = 0;   ///< vertices not used by any face
   int faces_flipped = 0;          ///< faces flipped to make orientation consistent
   int components_reversed = 0;    ///< components turned to face outward
