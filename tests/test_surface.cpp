@@ -2,11 +2,13 @@
 // its quad mesh, and open surfaces, on shapes built in code.
 #include <cmath>
 #include <map>
+#include <set>
 
 #include "polycube/chart/extract.h"
 #include "polycube/chart/labeling.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/solver.h"
+#include "polycube/quad/quad.h"
 #include "test_util.h"
 
 using namespace polycube;
@@ -151,4 +153,86 @@ TEST(SurfacePolycube, HemisphereGivesAnOpenBox) {
   const auto e = surface_polycube(h);
   expect_exact_polycube(h, e);
   EXPECT_EQ(e.charts.charts, 5);
+}
+
+namespace {
+
+quad::QuadResult surface_quads(const SurfaceMesh& s, double cells_per_unit, chart::PolycubeExtraction* out = nullptr) {
+  const auto e = surface_polycube(s);
+  EXPECT_TRUE(e.realized.success) << e.realized.failure;
+  if (out) *out = e;
+  return quad::quad_mesh_from_surface_polycube(s.V, s.F, e.realized.X, e.labels, cells_per_unit, s);
+}
+
+int euler_characteristic(const quad::QuadResult& q) {
+  std::set<std::pair<int, int>> edges;
+  for (int f = 0; f < q.Q.rows(); ++f)
+    for (int t = 0; t < 4; ++t) {
+      const int a = q.Q(f, t), b = q.Q(f, (t + 1) % 4);
+      edges.insert({std::min(a, b), std::max(a, b)});
+    }
+  return static_cast<int>(q.V.rows()) - static_cast<int>(edges.size()) + static_cast<int>(q.Q.rows());
+}
+
+}  // namespace
+
+TEST(SurfaceQuads, BoxGivesItsRegularGrid) {
+  const auto b = grid_box(4, Vec3(0, 0, 0), Vec3(2, 1, 1));
+  const auto q = surface_quads(b, 3.0);  // 3 cells per unit: 6 x 3 x 3
+  EXPECT_EQ(q.Q.rows(), 2 * (6 * 3 + 6 * 3 + 3 * 3));
+  EXPECT_EQ(q.V.rows(), 2 * (6 * 3 + 6 * 3 + 3 * 3) + 2);  // Euler: V - E + F = 2
+  EXPECT_NEAR(q.quality.sj_min, 1.0, 1e-9);
+  EXPECT_EQ(q.irregular_vertices, 8);
+  EXPECT_EQ(q.border_vertices, 0);
+  // On the box's surface.
+  for (int v = 0; v < q.V.rows(); ++v) {
+    const Vec3 p = q.V.row(v).transpose();
+    const double d = std::min({p.x(), 2 - p.x(), p.y(), 1 - p.y(), p.z(), 1 - p.z()});
+    EXPECT_NEAR(d, 0, 1e-12);
+  }
+}
+
+TEST(SurfaceQuads, SphereGivesAValidClosedQuadMesh) {
+  const auto s = sphere(4);
+  const auto q = surface_quads(s, 5.0);
+  EXPECT_EQ(q.quality.inverted, 0);
+  EXPECT_GT(q.quality.sj_min, 0.3);
+  EXPECT_EQ(euler_characteristic(q), 2);
+  EXPECT_EQ(q.irregular_vertices, 8);
+  EXPECT_EQ(q.border_loops, 0);
+}
+
+TEST(SurfaceQuads, TorusGivesAGenusOneQuadMesh) {
+  const auto t = torus(1.0, 0.4, 48, 16);
+  const auto q = surface_quads(t, 6.0);
+  EXPECT_EQ(q.quality.inverted, 0);
+  EXPECT_EQ(euler_characteristic(q), 0);
+}
+
+TEST(SurfaceQuads, OpenCylinderKeepsItsTwoBorderLoops) {
+  const auto c = open_cylinder();
+  const auto q = surface_quads(c, 4.0);
+  EXPECT_EQ(q.quality.inverted, 0);
+  EXPECT_GT(q.quality.sj_min, 0.5);
+  EXPECT_EQ(q.border_loops, 2);
+  EXPECT_EQ(euler_characteristic(q), 0);  // an annulus
+  EXPECT_EQ(q.irregular_vertices, 0);     // a tube: every inner vertex of valence 4
+  // Border vertices on the input border circles (z = 0 or 2, radius 1 up to the chords).
+  for (int v = 0; v < q.V.rows(); ++v) {
+    const Vec3 p = q.V.row(v).transpose();
+    if (std::abs(p.z()) < 1e-9 || std::abs(p.z() - 2) < 1e-9) EXPECT_GT(std::hypot(p.x(), p.y()), 0.99);
+  }
+  int on_border = 0;
+  for (int v = 0; v < q.V.rows(); ++v) on_border += std::abs(q.V(v, 2)) < 1e-9 || std::abs(q.V(v, 2) - 2) < 1e-9;
+  EXPECT_EQ(on_border, q.border_vertices);
+}
+
+TEST(SurfaceQuads, HemisphereKeepsItsBorderLoop) {
+  const auto h = hemisphere(4);
+  const auto q = surface_quads(h, 5.0);
+  EXPECT_EQ(q.quality.inverted, 0);
+  EXPECT_GT(q.quality.sj_min, 0.3);
+  EXPECT_EQ(q.border_loops, 1);
+  EXPECT_EQ(euler_characteristic(q), 1);  // a disk
+  for (int v = 0; v < q.V.rows(); ++v) EXPECT_NEAR(q.V.row(v).norm(), 1.0, 0.02);
 }

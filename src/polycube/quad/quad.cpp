@@ -66,6 +66,14 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
   const int n = static_cast<int>(back.size());
   r.V.resize(n, 3);
   for (int v = 0; v < n; ++v) r.V.row(v) = HV.row(back[v]);
+  smooth_on_surface(r, target, opt, hooks, {});
+  r.seconds = sw.seconds();
+  return r;
+}
+
+void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptions& opt, const Hooks& hooks,
+                       const std::vector<char>& pinned) {
+  const int n = static_cast<int>(r.V.rows());
   r.extracted = quad_quality(r.V, r.Q);
 
   // Neighbours, valence, incident quads.
@@ -80,7 +88,11 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
     std::sort(l.begin(), l.end());
     l.erase(std::unique(l.begin(), l.end()), l.end());
   }
-  for (int v = 0; v < n; ++v) r.irregular_vertices += vq[v].size() != 4;
+  r.irregular_vertices = 0;
+  for (int v = 0; v < n; ++v) {
+    if (!pinned.empty() && pinned[v]) continue;  // border vertices: valence 2-3 is regular there
+    r.irregular_vertices += vq[v].size() != 4;
+  }
 
   // Features of the target: vertices on sharp edges stay; the others stay on their patch.
   const geometry::TriangleTree tree(target.V, target.F);
@@ -111,7 +123,7 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
     hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
     int moves = 0;
     for (int v = 0; v < n; ++v) {
-      if (nb[v].empty()) continue;
+      if (nb[v].empty() || (!pinned.empty() && pinned[v])) continue;
       // A feature vertex stays, unless one of its quads is folded or nearly flat: then it may move,
       // and like the vertices of poor quads (< kCrossPatchBelow) it may leave its patch.
       const double before = worst(v);
@@ -142,9 +154,7 @@ QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const Surface
     if (moves == 0) break;
   }
   r.quality = quad_quality(r.V, r.Q);
-  r.seconds = sw.seconds();
   hooks.report("quad", 1);
-  return r;
 }
 
 }  // namespace polycube::quad

@@ -35,10 +35,37 @@ struct QuadResult {
   QuadQuality extracted, quality;
   int smooth_moves = 0;
   double seconds = 0;
+  // Surface mode (quad_mesh_from_surface_polycube):
+  double cells_per_unit = 0;              ///< grid cells per length unit of the polycube
+  std::array<int, 3> planes{};            ///< distinct integer planes per axis
+  std::array<int, 3> cells{};             ///< grid extent per axis
+  int border_vertices = 0;                ///< vertices on the border of an open surface (kept on it)
+  int border_loops = 0;                   ///< border loops of the quad mesh
 };
 
 /// The quad mesh of the boundary of a hex mesh (HV, H), smoothed on `target` (the input surface).
 QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const SurfaceMesh& target,
                                 const QuadOptions& opt = {}, const Hooks& hooks = {});
+
+/// Smooths the quads (r.V, r.Q) on `target` as quad_mesh_from_hexes does; `pinned` (empty, or one
+/// flag per vertex) marks vertices that stay (the border of an open surface). Sets r.extracted,
+/// r.quality, r.irregular_vertices (pinned ones excepted), r.feature_vertices, r.smooth_moves.
+void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptions& opt, const Hooks& hooks,
+                       const std::vector<char>& pinned);
+
+/// Surface mode (paper Section 5.3): quads straight from an exact surface polycube, no volume.
+/// X: the polycube positions of the triangles F (labels per triangle), the same connectivity as
+/// `rest`, the surface being meshed (so the pair is the surface map). Per axis the distinct plane
+/// heights (charts, and the lines of the border segments of an open surface) are snapped in
+/// sorted order to integers, at least one cell apart (hex::snap_heights), and the polycube is
+/// mapped by the per-axis piecewise-linear map sending them there (exact, injective). Every
+/// integer point of a chart is carried to `rest` by its barycentric coordinates in its triangle
+/// (shared points once: the mesh is conforming across chart borders), and every unit square of a
+/// chart is a quad, oriented by its chart's label. Border vertices of an open surface lie on its
+/// border and stay there; the others are smoothed on `target`. cells_per_unit > 0.
+QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& X,
+                                           const std::vector<int>& labels, double cells_per_unit,
+                                           const SurfaceMesh& target, const QuadOptions& opt = {},
+                                           const Hooks& hooks = {});
 
 }  // namespace polycube::quad

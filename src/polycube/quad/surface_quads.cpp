@@ -1,0 +1,196 @@
+// Quads from an exact surface polycube (surface mode): see quad.h.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+
+#include "polycube/core/error.h"
+#include "polycube/core/topology.h"
+#include "polycube/hex/snap.h"
+#include "polycube/quad/quad.h"
+
+namespace polycube::quad {
+
+namespace {
+
+// Per-axis piecewise-linear map: sorted heights h_i -> integers n_i, slope s outside.
+struct AxisMap {
+  std::vector<double> h;
+  std::vector<int> n;
+  double s = 1;
+  double operator()(double x) const {
+    if (h.empty()) return s * x;
+    if (x <= h.front()) return n.front() + s * (x - h.front());
+    if (x >= h.back()) return n.back() + s * (x - h.back());
+    const size_t i = static_cast<size_t>(std::upper_bound(h.begin(), h.end(), x) - h.begin()) - 1;
+    if (x == h[i]) return n[i];
+    return n[i] + (x - h[i]) / (h[i + 1] - h[i]) * (n[i + 1] - n[i]);
+  }
+};
+
+}  // namespace
+
+QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& X,
+                                           const std::vector<int>& labels, double cells_per_unit,
+                                           const SurfaceMesh& target, const QuadOptions& opt, const Hooks& hooks) {
+  Stopwatch sw;
+  POLYCUBE_ASSERT(cells_per_unit > 0, "cells_per_unit must be positive");
+  POLYCUBE_ASSERT(static_cast<Eigen::Index>(labels.size()) == F.rows(), "one label per triangle");
+  QuadResult r;
+  r.cells_per_unit = cells_per_unit;
+  const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
+  const double tol = 1e-9 * diag;
+
+  // ---- planes: chart heights, and coordinates shared along border edges ----
+  std::array<std::vector<double>, 3> raw;
+  for (int f = 0; f < F.rows(); ++f) raw[labels[f] / 2].push_back(X(F(f, 0), labels[f] / 2));
+  const auto loops = border_loops(F);
+  for (const auto& loop : loops)
+    for (const auto& e : loop)
+      for (int m = 0; m < 3; ++m)
+        if (X(e[0], m) == X(e[1], m)) raw[m].push_back(X(e[0], m));
+  std::array<AxisMap, 3> map;
+  for (int k = 0; k < 3; ++k) {
+    std::sort(raw[k].begin(), raw[k].end());
+    std::vector<double> h;
+    for (double x : raw[k])
+      if (h.empty() || x - h.back() > tol) h.push_back(x);
+    map[k].h = h;
+    map[k].n = hex::snap_heights(h, cells_per_unit);
+    map[k].s = cells_per_unit;
+    r.planes[k] = static_cast<int>(h.size());
+  }
+  MatX3d Y(X.rows(), 3);
+  for (int v = 0; v < X.rows(); ++v)
+    for (int k = 0; k < 3; ++k) Y(v, k) = map[k](X(v, k));
+  for (int k = 0; k < 3; ++k)
+    r.cells[k] = static_cast<int>(std::lround(Y.col(k).maxCoeff() - Y.col(k).minCoeff()));
+
+  // ---- grid points and unit squares of every chart ----
+  std::map<std::array<int, 3>, int> vid;
+  std::vector<Vec3> pos;
+  std::set<std::array<int, 4>> cells;  // (label, plane integer, i, j)
+  for (int f = 0; f < F.rows(); ++f) {
+    const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+    const int c = static_cast<int>(std::lround(Y(F(f, 0), k)));
+    Eigen::Vector2d p[3];
+    for (int j = 0; j < 3; ++j) p[j] = Eigen::Vector2d(Y(F(f, j), a), Y(F(f, j), b));
+    const double A = (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
+    if (!(std::abs(A) > 0)) continue;  // no area in the chart: holds no grid point of its own
+    auto bary = [&](const Eigen::Vector2d& q) {
+      Eigen::Vector3d l;
+      for (int j = 0; j < 3; ++j) {
+        const Eigen::Vector2d u = p[(j + 1) % 3] - q, w = p[(j + 2) % 3] - q;
+        l[j] = (u.x() * w.y() - u.y() * w.x()) / A;
+      }
+      return l;
+    };
+    const double eps = 1e-9;
+    const double lo_a = std::min({p[0].x(), p[1].x(), p[2].x()}), hi_a = std::max({p[0].x(), p[1].x(), p[2].x()});
+    const double lo_b = std::min({p[0].y(), p[1].y(), p[2].y()}), hi_b = std::max({p[0].y(), p[1].y(), p[2].y()});
+    for (int i = static_cast<int>(std::ceil(lo_a - eps)); i <= static_cast<int>(std::floor(hi_a + eps)); ++i)
+      for (int j = static_cast<int>(std::ceil(lo_b - eps)); j <= static_cast<int>(std::floor(hi_b + eps)); ++j) {
+        Eigen::Vector3d l = bary(Eigen::Vector2d(i, j));
+        if (l.minCoeff() < -eps) continue;
+        std::array<int, 3> key;
+        key[k] = c;
+        key[a] = i;
+        key[b] = j;
+        if (vid.count(key)) continue;
+        l = l.cwiseMax(0.0);
+        l /= l.sum();
+        Vec3 x = Vec3::Zero();
+        for (int t = 0; t < 3; ++t) x += l[t] * rest.row(F(f, t)).transpose();
+        vid.emplace(key, static_cast<int>(pos.size()));
+        pos.push_back(x);
+      }
+    for (int i = static_cast<int>(std::floor(lo_a)); i < static_cast<int>(std::ceil(hi_a)); ++i)
+      for (int j = static_cast<int>(std::floor(lo_b)); j < static_cast<int>(std::ceil(hi_b)); ++j)
+        if (bary(Eigen::Vector2d(i + 0.5, j + 0.5)).minCoeff() >= -eps) cells.insert({labels[f], c, i, j});
+  }
+  r.V.resize(static_cast<Eigen::Index>(pos.size()), 3);
+  for (size_t v = 0; v < pos.size(); ++v) r.V.row(static_cast<Eigen::Index>(v)) = pos[v].transpose();
+  std::vector<std::array<int, 4>> quads;
+  int missing = 0;
+  for (const auto& [label, c, i, j] : cells) {
+    const int k = label / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+    const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
+    std::array<int, 4> q;
+    bool ok = true;
+    for (int t = 0; t < 4 && ok; ++t) {
+      std::array<int, 3> key;
+      key[k] = c;
+      key[a] = i + di[t];
+      key[b] = j + dj[t];
+      const auto it = vid.find(key);
+      ok = it != vid.end();
+      if (ok) q[t] = it->second;
+    }
+    if (!ok) {
+      ++missing;
+      continue;
+    }
+    if (label % 2) std::swap(q[1], q[3]);  // -k: clockwise in (a, b) is counter-clockwise seen from -k
+    quads.push_back(q);
+  }
+  if (missing > 0)
+    throw Error(ErrorKind::Polycube, std::to_string(missing) + " grid squares of the surface polycube miss a corner");
+  r.Q.resize(static_cast<Eigen::Index>(quads.size()), 4);
+  for (size_t q = 0; q < quads.size(); ++q)
+    for (int t = 0; t < 4; ++t) r.Q(static_cast<Eigen::Index>(q), t) = quads[q][t];
+  // Unused grid points (a chart's point no square uses cannot occur on a valid polycube; keep the
+  // mesh clean anyway).
+  {
+    std::vector<int> used(r.V.rows(), -1);
+    int n = 0;
+    for (int q = 0; q < r.Q.rows(); ++q)
+      for (int t = 0; t < 4; ++t)
+        if (used[r.Q(q, t)] < 0) used[r.Q(q, t)] = n++;
+    MatX3d V2(n, 3);
+    for (int v = 0; v < r.V.rows(); ++v)
+      if (used[v] >= 0) V2.row(used[v]) = r.V.row(v);
+    for (int q = 0; q < r.Q.rows(); ++q)
+      for (int t = 0; t < 4; ++t) r.Q(q, t) = used[r.Q(q, t)];
+    r.V = std::move(V2);
+  }
+
+  // ---- border: quad edges used once stay on the input border ----
+  std::map<std::pair<int, int>, int> edge_use;
+  for (int q = 0; q < r.Q.rows(); ++q)
+    for (int t = 0; t < 4; ++t) {
+      const int u = r.Q(q, t), w = r.Q(q, (t + 1) % 4);
+      edge_use[{std::min(u, w), std::max(u, w)}]++;
+    }
+  std::vector<char> pinned(r.V.rows(), 0);
+  std::vector<std::vector<int>> bnb(r.V.rows());
+  for (const auto& [e, cnt] : edge_use)
+    if (cnt == 1) {
+      pinned[e.first] = pinned[e.second] = 1;
+      bnb[e.first].push_back(e.second);
+      bnb[e.second].push_back(e.first);
+    }
+  for (char p : pinned) r.border_vertices += p;
+  {
+    std::vector<char> seen(r.V.rows(), 0);
+    for (int v = 0; v < r.V.rows(); ++v) {
+      if (!pinned[v] || seen[v]) continue;
+      ++r.border_loops;
+      std::vector<int> stack{v};
+      seen[v] = 1;
+      while (!stack.empty()) {
+        const int u = stack.back();
+        stack.pop_back();
+        for (int w : bnb[u])
+          if (!seen[w]) seen[w] = 1, stack.push_back(w);
+      }
+    }
+  }
+  hooks.debug("surface quads: " + std::to_string(r.Q.rows()) + " quads, " + std::to_string(r.V.rows()) +
+              " vertices, planes " + std::to_string(r.planes[0]) + "/" + std::to_string(r.planes[1]) + "/" +
+              std::to_string(r.planes[2]) + ", " + std::to_string(r.border_vertices) + " border vertices");
+  smooth_on_surface(r, target, opt, hooks, loops.empty() ? std::vector<char>{} : pinned);
+  r.seconds = sw.seconds();
+  return r;
+}
+
+}  // namespace polycube::quad
