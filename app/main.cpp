@@ -65,7 +65,8 @@ int main(int argc, char** argv) {
   if (argc >= 2 && std::string(argv[1]) == "measure") return measure_main(argc - 1, argv + 1);
   CLI::App app{
       "polycube: l1-based polycube maps of 3D shapes and hex/quad remeshing.\n"
-      "Reads a closed triangle surface (OBJ, OFF, STL, PLY), a tet or hex mesh (MEDIT .mesh, VTK, Gmsh .msh)\n"
+      "Reads a closed triangle surface (OBJ, OFF, STL, PLY; open ones with --surface), a tet or hex mesh\n"
+      "(MEDIT .mesh, VTK, Gmsh .msh)\n"
       "or a CAD model (STEP, IGES, BREP), validates it, tetrahedralizes it and writes the results and\n"
       "report.json into the output folder. Lengths are relative to the input's bounding-box diagonal.\n"
       "Exit codes: 0 ok, 2 usage, 3 unreadable input, 4 invalid mesh, 5 tetrahedralization failed,\n"
@@ -174,9 +175,13 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  app.add_flag("--surface", opt.surface,
+               "Surface mode (paper Sec. 5.3): no tets; the surface deforms with a surface ARAP distortion and "
+               "quads come straight from the surface polycube. Accepts open surfaces (borders become "
+               "axis-aligned and are kept). Not with --hex");
   bool run_quad = false;
   app.add_flag("--quad", run_quad, "Run through to the quad mesh of the surface (same as --until quad)");
-  app.add_option("--quads", opt.target_quads, "Quad mesh: approximate number of quads (0 = the hex grid's resolution)")
+  app.add_option("--quads", opt.target_quads, "Quad mesh: approximate number of quads (0 = the hex grid's resolution; 2000 with --surface)")
       ->capture_default_str()->check(CLI::Range(0, 100000000));
   app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));

@@ -9,6 +9,10 @@
 #include "polycube/deform/energies.h"
 #include "polycube/deform/solver.h"
 #include "polycube/quad/quad.h"
+#include "polycube/io/readers.h"
+#include "polycube/io/writers.h"
+#include <filesystem>
+#include <nlohmann/json.hpp>
 #include "test_util.h"
 
 using namespace polycube;
@@ -235,4 +239,51 @@ TEST(SurfaceQuads, HemisphereKeepsItsBorderLoop) {
   EXPECT_EQ(q.border_loops, 1);
   EXPECT_EQ(euler_characteristic(q), 1);  // a disk
   for (int v = 0; v < q.V.rows(); ++v) EXPECT_NEAR(q.V.row(v).norm(), 1.0, 0.02);
+}
+
+// ---- CLI ------------------------------------------------------------------------------------
+
+TEST(SurfaceCli, OpenHemisphereGivesQuadsWithItsBorder) {
+  const std::string dir = temp_dir("surface_cli");
+  const auto h = hemisphere(3);
+  // Shifted and scaled: the quads must come out at the input's place and size.
+  const MatX3d V = (h.V * 5.0).rowwise() + Eigen::RowVector3d(10, -4, 2);
+  io::write_obj(dir + "/in.obj", V, h.F);
+  // Without --surface an open surface is refused, and the message says what to do.
+  RunResult bad = run_cli(dir + "/in.obj -o " + dir + "/vol -q");
+  EXPECT_EQ(bad.code, 4) << bad.output;
+  EXPECT_NE(bad.output.find("--surface"), std::string::npos) << bad.output;
+  RunResult r = run_cli(dir + "/in.obj --surface --quad --quads 600 -o " + dir + "/out -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto rep = nlohmann::json::parse(read_text(dir + "/out/report.json"));
+  EXPECT_EQ(rep["mode"], "surface");
+  EXPECT_EQ(rep["input"]["border_loops"], 1);
+  EXPECT_EQ(rep["polycube"]["charts"], 5);
+  EXPECT_EQ(rep["tetmesh"]["tets"], 0);
+  EXPECT_LT(rep["polycube"]["border_l1_quality"].get<double>(), 1e-3);
+  EXPECT_EQ(rep["quad"]["inverted"], 0);
+  EXPECT_EQ(rep["quad"]["border_loops"], 1);
+  EXPECT_GT(rep["quad"]["count"].get<int>(), 400);
+  EXPECT_LT(rep["quad"]["count"].get<int>(), 900);
+  EXPECT_LT(rep["quad"]["hausdorff_rel"].get<double>(), 0.02);
+  const MeshData q = io::read_mesh(dir + "/out/quad.mesh", {});
+  // The reader may give quads, or (for a surface-only file) split them into triangle pairs.
+  EXPECT_EQ(q.Q.rows() > 0 ? q.Q.rows() : q.F.rows() / 2, rep["quad"]["count"].get<int>());
+  for (int v = 0; v < q.V.rows(); ++v)
+    EXPECT_NEAR((q.V.row(v) - Eigen::RowVector3d(10, -4, 2)).norm(), 5.0, 0.1);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/out/tetmesh.mesh"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out/labels.txt"));
+  // Hexes need the volume.
+  RunResult hx = run_cli(dir + "/in.obj --surface --hex -o " + dir + "/hex -q");
+  EXPECT_EQ(hx.code, 2) << hx.output;
+}
+
+TEST(SurfaceCli, ExampleInSurfaceModeIsFast) {
+  const std::string dir = temp_dir("surface_cli_example");
+  RunResult r = run_cli("--example box_hole --surface --quad -o " + dir + "/out -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto rep = nlohmann::json::parse(read_text(dir + "/out/report.json"));
+  EXPECT_EQ(rep["input"]["genus"], 1);
+  EXPECT_EQ(rep["quad"]["inverted"], 0);
+  EXPECT_GT(rep["quad"]["sj_min"].get<double>(), 0.5);
 }

@@ -181,33 +181,253 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       return r;
     }
   }
-  MatX3d X = positions();
-  double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
-  const double e_start = e_prev;
-  for (int it = 0; it < opt.max_iterations; ++it) {
-    // Local step: rotations per vertex; right-hand sides b_p = sum_t w_t Rbar_t g_p.
-    Eigen::VectorXd g = Eigen::VectorXd::Zero(3 * n);
-    deform::surface_arap_energy(X, F, ar, 1.0, &g, nullptr);
-    // g = L x - b, so b = L x - g.
-    for (int k = 0; k < 3; ++k) {
-      Eigen::VectorXd xk = X.col(k);
-      Eigen::VectorXd gk(n);
-      for (int v = 0; v < n; ++v) gk[v] = g[3 * v + k];
-      const Eigen::VectorXd b = L * xk - gk;
-      y[k] = solver[k].solve(S[k].transpose() * b + reg * y[k]);
+  const double diag0 = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
+  auto misoriented = [&](const MatX3d& X) {
+    int m = 0;
+    for (int f = 0; f < F.rows(); ++f) {
+      const Vec3 N = deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2));
+      m += !(N.dot(label_direction(labels[f])) > 1e-14 * diag0 * diag0);
     }
-    X = positions();
-    const double e = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
-    r.iterations = it + 1;
-    hooks.report("polycube", 0.9 * (it + 1) / opt.max_iterations);
-    if (e_prev - e < opt.tolerance * std::max(1e-300, e_start)) {
+    return m;
+  };
+  // Local/global iterations from y. guard: an iterate with more misoriented triangles than the
+  // best so far ends the run (the best is kept).
+  auto arap = [&](std::array<Eigen::VectorXd, 3>& yy, bool guard, int& iterations) {
+    y = yy;
+    MatX3d X = positions();
+    double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
+    const double e_start = e_prev;
+    int bad = guard ? misoriented(X) : 0;
+    iterations = 0;
+    for (int it = 0; it < opt.max_iterations; ++it) {
+      Eigen::VectorXd g = Eigen::VectorXd::Zero(3 * n);
+      deform::surface_arap_energy(X, F, ar, 1.0, &g, nullptr);
+      const std::array<Eigen::VectorXd, 3> y_old = y;
+      for (int k = 0; k < 3; ++k) {
+        // g = L x - b (rotations fixed), so b = L x - g.
+        Eigen::VectorXd gk(n);
+        for (int v = 0; v < n; ++v) gk[v] = g[3 * v + k];
+        const Eigen::VectorXd b = L * Eigen::VectorXd(X.col(k)) - gk;
+        y[k] = solver[k].solve(S[k].transpose() * b + reg * y[k]);
+      }
+      MatX3d Xn = positions();
+      if (guard) {
+        const int m = misoriented(Xn);
+        if (m > bad) {
+          y = y_old;
+          break;
+        }
+        bad = m;
+      }
+      X = std::move(Xn);
+      const double e = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
+      iterations = it + 1;
+      hooks.report("polycube", 0.9 * (it + 1) / opt.max_iterations);
+      const bool done = e_prev - e < opt.tolerance * std::max(1e-300, e_start);
       e_prev = e;
-      break;
+      if (done) break;
     }
-    e_prev = e;
+    yy = y;
+    return X;
+  };
+  std::array<Eigen::VectorXd, 3> y_start = y;
+  int its = 0;
+  MatX3d X = arap(y_start, false, its);
+  r.iterations = its;
+  int bad = misoriented(X);
+  hooks.debug("surface realization from the deformed surface: " + std::to_string(its) + " local/global iterations, " +
+              std::to_string(bad) + " misoriented triangles");
+  if (bad > 0) {
+    // Second start: every coordinate that no plane holds harmonic (uniform weights, a Tutte-like
+    // layout of each chart between its borders), planes at their heights; then ARAP iterations
+    // that never add a misoriented triangle.
+    std::vector<Eigen::Triplet<double>> ut;
+    for (const auto& [a, b] : unique_edges(F)) {
+      ut.emplace_back(a, a, 1.0);
+      ut.emplace_back(b, b, 1.0);
+      ut.emplace_back(a, b, -1.0);
+      ut.emplace_back(b, a, -1.0);
+    }
+    SpMat U(n, n);
+    U.setFromTriplets(ut.begin(), ut.end());
+    std::array<Eigen::VectorXd, 3> y2 = y_start;
+    for (int k = 0; k < 3; ++k) {
+      // Plane unknowns [0, planes) held at their heights by a stiff penalty; the rest harmonic.
+      SpMat A = S[k].transpose() * U * S[k];
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(nvar[k]);
+      const double stiff = 1e8;
+      for (int i = 0; i < r.planes[k]; ++i) {
+        A.coeffRef(i, i) += stiff;
+        rhs[i] = stiff * y_start[k][i];
+      }
+      Eigen::SimplicialLDLT<SpMat> h(A);
+      if (h.info() == Eigen::Success) {
+        y2[k] = h.solve(rhs);
+        for (int i = 0; i < r.planes[k]; ++i) y2[k][i] = y_start[k][i];
+      }
+    }
+    int its2 = 0;
+    MatX3d X2 = arap(y2, true, its2);
+    const int bad2 = misoriented(X2);
+    hooks.debug("surface realization from the harmonic start: " + std::to_string(its2) +
+                " local/global iterations, " + std::to_string(bad2) + " misoriented triangles");
+    if (bad2 < bad) {
+      X = std::move(X2);
+      r.iterations = its2;
+      r.start = "surface_harmonic";
+    }
   }
-  hooks.debug("surface realization: ARAP " + std::to_string(e_start) + " -> " + std::to_string(e_prev) + " in " +
-              std::to_string(r.iterations) + " local/global iterations");
+  if (misoriented(X) > 0) {
+    // Elliptic untangling (Garanzha et al. 2021, 2D) of the chart layouts: every triangle in its
+    // chart's plane, mirrored for negative labels so that facing its label = positive area; plane
+    // heights fixed, the other unknowns free; L-BFGS preconditioned by the ARAP factorizations,
+    // eps decreasing by the paper's rule.
+    std::array<int, 4> off{0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + nvar[k];
+    // Unknowns from X (each variable's value is shared by its vertices).
+    Eigen::VectorXd z(off[3]);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k) z[off[k] + var[k][v]] = X(v, k);
+    std::vector<Eigen::Matrix2d> Dm_inv(F.rows());
+    double rest_area = 0, poly_area = 0;
+    for (int f = 0; f < F.rows(); ++f) {
+      const Vec3 e1 = (rest.row(F(f, 1)) - rest.row(F(f, 0))).transpose();
+      const Vec3 e2 = (rest.row(F(f, 2)) - rest.row(F(f, 0))).transpose();
+      const double l1 = e1.norm(), a2 = e1.cross(e2).norm();
+      Eigen::Matrix2d Dm;
+      Dm << l1, e2.dot(e1) / std::max(l1, 1e-300), 0, a2 / std::max(l1, 1e-300);
+      Dm_inv[f] = a2 > 0 ? Eigen::Matrix2d(Dm.inverse()) : Eigen::Matrix2d::Identity();
+      rest_area += 0.5 * a2;
+      poly_area += std::abs(deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2)).dot(label_direction(labels[f])));
+    }
+    const double scale = std::sqrt(poly_area / std::max(rest_area, 1e-300));
+    const double theta = 1.0 / 128;
+    auto chi = [](double D, double eps) { return 0.5 * (D + std::sqrt(eps * eps + D * D)); };
+    double min_det = 0;
+    auto energy = [&](const Eigen::VectorXd& zz, double eps, Eigen::VectorXd* g) {
+      if (g) g->setZero(zz.size());
+      double E = 0;
+      min_det = std::numeric_limits<double>::infinity();
+      for (int f = 0; f < F.rows(); ++f) {
+        const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+        const double sg = labels[f] % 2 ? -1.0 : 1.0;
+        Eigen::Vector2d q[3];
+        for (int j = 0; j < 3; ++j)
+          q[j] = Eigen::Vector2d(sg * zz[off[a] + var[a][F(f, j)]], zz[off[b] + var[b][F(f, j)]]);
+        Eigen::Matrix2d Ds;
+        Ds << q[1] - q[0], q[2] - q[0];
+        const Eigen::Matrix2d J = Ds * Dm_inv[f] / scale;
+        const double D = J.determinant();
+        min_det = std::min(min_det, D);
+        const double c = chi(D, eps), r2 = std::sqrt(eps * eps + D * D);
+        const double tr = J.squaredNorm();
+        const double w = ar.w[f];
+        E += w * ((1 - theta) * tr / c + theta * (1 + D * D) / c);
+        if (!g) continue;
+        Eigen::Matrix2d cof;
+        cof << J(1, 1), -J(1, 0), -J(0, 1), J(0, 0);
+        const double dc = c / r2;  // d chi / dD
+        const Eigen::Matrix2d dJ = w * ((1 - theta) * (2 * J / c - tr / (c * c) * dc * cof) +
+                                        theta * (2 * D / c - (1 + D * D) / (c * c) * dc) * cof);
+        const Eigen::Matrix2d G = dJ * Dm_inv[f].transpose() / scale;  // d E / d Ds
+        const Eigen::Vector2d gq[3] = {-(G.col(0) + G.col(1)), G.col(0), G.col(1)};
+        for (int j = 0; j < 3; ++j) {
+          const int ia = off[a] + var[a][F(f, j)], ib = off[b] + var[b][F(f, j)];
+          if (var[a][F(f, j)] >= r.planes[a]) (*g)[ia] += sg * gq[j][0];
+          if (var[b][F(f, j)] >= r.planes[b]) (*g)[ib] += gq[j][1];
+        }
+      }
+      return E;
+    };
+    auto precondition = [&](const Eigen::VectorXd& g) {
+      Eigen::VectorXd d(g.size());
+      for (int k = 0; k < 3; ++k) {
+        d.segment(off[k], nvar[k]) = solver[k].solve(g.segment(off[k], nvar[k]));
+        d.segment(off[k], r.planes[k]).setZero();
+      }
+      return d;
+    };
+    auto to_X = [&](const Eigen::VectorXd& zz) {
+      MatX3d Y(n, 3);
+      for (int v = 0; v < n; ++v)
+        for (int k = 0; k < 3; ++k) Y(v, k) = zz[off[k] + var[k][v]];
+      return Y;
+    };
+    double eps = 1.0;
+    int best = misoriented(X), since_best = 0, total = 0;
+    Eigen::VectorXd g, gt;
+    energy(z, eps, nullptr);
+    for (int round = 0; round < 60 && best > 0 && since_best < 15; ++round) {
+      double E = energy(z, eps, &g);
+      const double E0 = E;
+      std::vector<Eigen::VectorXd> Sv, Yv;
+      std::vector<double> rho;
+      for (int it = 0; it < 300; ++it, ++total) {
+        // Two-loop recursion with the ARAP preconditioner as the initial inverse Hessian.
+        Eigen::VectorXd qv = g;
+        std::vector<double> al(Sv.size());
+        for (int i = static_cast<int>(Sv.size()) - 1; i >= 0; --i) {
+          al[i] = rho[i] * Sv[i].dot(qv);
+          qv -= al[i] * Yv[i];
+        }
+        Eigen::VectorXd d = precondition(qv);
+        for (size_t i = 0; i < Sv.size(); ++i) d += Sv[i] * (al[i] - rho[i] * Yv[i].dot(d));
+        d = -d;
+        double slope = d.dot(g);
+        if (!(slope < 0)) {
+          Sv.clear(), Yv.clear(), rho.clear();
+          d = -precondition(g);
+          slope = d.dot(g);
+          if (!(slope < 0)) break;
+        }
+        double step = 1, Et = E;
+        bool ok = false;
+        for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+          Et = energy(z + step * d, eps, &gt);
+          if (Et <= E + 1e-4 * step * slope) {
+            ok = true;
+            break;
+          }
+        }
+        if (!ok) break;
+        const Eigen::VectorXd sv = step * d, yv = gt - g;
+        z += sv;
+        const double decrease = E - Et;
+        E = Et;
+        g = gt;
+        if (sv.dot(yv) > 1e-300) {
+          if (Sv.size() == 8) Sv.erase(Sv.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
+          Sv.push_back(sv);
+          Yv.push_back(yv);
+          rho.push_back(1 / sv.dot(yv));
+        }
+        if (decrease < 1e-13 * std::abs(E)) break;
+      }
+      energy(z, eps, nullptr);
+      const int m = misoriented(to_X(z));
+      hooks.debug("surface untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
+                  ", min det " + std::to_string(min_det) + ", " + std::to_string(m) + " misoriented");
+      if (m < best) best = m, since_best = 0;
+      else ++since_best;
+      const double sigma = std::max(1 - E / E0, 0.1);
+      const double mu = (1 - sigma) * chi(min_det, eps);
+      eps = min_det < mu ? 2 * std::sqrt(mu * (mu - min_det)) : 1e-13;
+      if (m == 0) break;
+    }
+    MatX3d Xu = to_X(z);
+    if (misoriented(Xu) < misoriented(X)) {
+      X = std::move(Xu);
+      r.untangle_iterations = total;
+      // ARAP iterations from the untangled layout, never adding a misoriented triangle.
+      std::array<Eigen::VectorXd, 3> yu;
+      for (int k = 0; k < 3; ++k) yu[k] = z.segment(off[k], nvar[k]);
+      int its3 = 0;
+      X = arap(yu, true, its3);
+      r.iterations = its3;
+      r.start += "+untangled";
+    }
+  }
+  const double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
 
   // ---- checks ----
   r.rest = rest;

@@ -87,6 +87,8 @@ json surface_json(const SurfaceReport& r) {
           {"components", r.components},
           {"genus", r.genus},
           {"closed", r.closed},
+          {"border_loops", r.border_loops},
+          {"border_edges", r.border_edges},
           {"repaired", r.repaired()},
           {"repairs",
            {{"faces_flipped", r.faces_flipped},
@@ -151,6 +153,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       in = io::read_mesh(opt.input, opt.cad);
     }
     report["input"] = {{"path", opt.input}, {"format", in.format}};
+    report["mode"] = opt.surface ? "surface" : "volume";
+    if (opt.surface && opt.until == Stage::Hex)
+      throw Error(ErrorKind::Usage, "hex meshes need the volume: drop --surface (surface mode builds quads)");
     if (!opt.example.empty()) report["input"]["example"] = opt.example;
     if (in.T.rows() > 0 && in.H.rows() > 0)
       throw Error(ErrorKind::InvalidMesh, in.path + ": mixed tetrahedral and hexahedral meshes are not supported");
@@ -162,6 +167,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     // Tet vertex of every surface vertex while the tet boundary is the input surface (empty once
     // the surface is remeshed): the polycube map then needs no transfer.
     std::vector<int> surf_to_tet;
+    bool input_closed = true;
     if (in.T.rows() > 0) {
       // Tet mesh input: checked, its boundary validated like a surface input.
       report["input"]["kind"] = "tet";
@@ -187,7 +193,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       MeshData s = in.H.rows() > 0 ? hex_boundary_surface(in) : in;
       report["input"]["kind"] = in.H.rows() > 0 ? "hex" : "surface";
       if (in.H.rows() > 0) report["input"]["hexes"] = in.H.rows();
-      SurfaceReport sr = validate_surface(s, layout, opt.validate);
+      ValidateOptions vo = opt.validate;
+      vo.allow_open = vo.allow_open || opt.surface;
+      SurfaceReport sr = validate_surface(s, layout, vo);
+      input_closed = sr.closed;
       report["input"].update(surface_json(sr));
       if (sr.repaired())
         hooks.warn("input repaired: " + std::to_string(sr.faces_flipped) + " faces flipped, " +
@@ -209,7 +218,34 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       Stopwatch st;
       hooks.report("tet", 0);
       json tj;
-      if (have_tets) {
+      if (opt.surface) {
+        // Surface mode: no tets; the (possibly remeshed) surface is the mesh that deforms.
+        SurfaceMesh used = surface;
+        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
+        const double el = opt.tet.edge_length * diag;
+        if (el > 0) {
+          if (!input_closed)
+            throw Error(ErrorKind::Usage, "--edge-length remeshes closed surfaces only; this one has " +
+                                              std::to_string(report["input"]["border_loops"].get<int>()) +
+                                              " border loops (remesh it beforehand, or drop --edge-length)");
+          hooks.info("remeshing the surface to edge length " + std::to_string(el));
+          SurfaceLayout used_layout = layout;
+          used = remesh_surface(surface, layout, el);
+          MeshData rm = make_mesh_data(used.V, used.F, "remeshed");
+          rm.path = "remeshed surface";
+          validate_surface(rm, used_layout, opt.validate);
+          used.V = rm.V;
+          used.F = rm.F;
+        } else {
+          surf_to_tet.resize(surface.V.rows());
+          std::iota(surf_to_tet.begin(), surf_to_tet.end(), 0);
+        }
+        tm.V = used.V;
+        tm.T.resize(0, 4);
+        tm.boundary = used.F;
+        tj = {{"source", "none (surface mode)"}, {"vertices", tm.V.rows()}, {"triangles", tm.boundary.rows()},
+              {"tets", 0}, {"remeshed", el > 0}};
+      } else if (have_tets) {
         check_tet_mesh(tm, nullptr, in.path);
         tj = tet_json(tm, measure_tets(tm.V, tm.T));
         tj["source"] = "input";
@@ -241,7 +277,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj["gmsh_runs"] = stats.attempts;
       }
       // Tets with four boundary vertices would have to flatten on polycube faces: split them.
-      const int split = split_boundary_tets(tm);
+      const int split = opt.surface ? 0 : split_boundary_tets(tm);
       if (split > 0) {
         check_tet_mesh(tm, nullptr, "split tet mesh");
         const TetQuality sq = measure_tets(tm.V, tm.T);
@@ -257,9 +293,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       out_m.V = tm.V;
       out_m.T = tm.T;
       out_m.F = tm.boundary;
-      write_mesh("tetmesh", out_m);
+      if (!opt.surface) write_mesh("tetmesh", out_m);
       report["timings"]["tet"] = st.seconds();
-      hooks.info("tet mesh: " + std::to_string(tm.V.rows()) + " vertices, " + std::to_string(tm.T.rows()) +
+      if (!opt.surface) hooks.info("tet mesh: " + std::to_string(tm.V.rows()) + " vertices, " + std::to_string(tm.T.rows()) +
                  " tets, min dihedral " + std::to_string(tj["min_dihedral_deg"].get<double>()) + " deg");
       hooks.report("tet", 1);
     }
@@ -328,10 +364,13 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform)) {
       Stopwatch sd;
       hooks.report("deform", 0);
-      hooks.info("deforming towards a polycube (" + std::to_string(tm.T.rows()) + " tets)");
+      hooks.info(opt.surface ? "deforming the surface towards a polycube (" + std::to_string(tm.boundary.rows()) +
+                                   " triangles, surface ARAP)"
+                             : "deforming towards a polycube (" + std::to_string(tm.T.rows()) + " tets)");
       deform::DeformOptions dopt = opt.deform;
       dopt.edges.insert(dopt.edges.end(), mapped.terms.begin(), mapped.terms.end());
-      dr = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, dopt, hooks);
+      dr = opt.surface ? deform::deform_surface_to_polycube(tm.V, tm.boundary, dopt, hooks)
+                       : deform::deform_to_polycube(tm.V, tm.T, tm.boundary, dopt, hooks);
       if (!mapped.terms.empty()) {
         // Final normal angle per constrained edge (90 for a polycube edge, 0 inside a face).
         const std::vector<double> ang = constraints::normal_angles_deg(mapped, dr.X, tm.boundary, pairs);
@@ -369,6 +408,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"converged", dr.converged},
                  {"seconds", dr.seconds},
                  {"factorizations", dr.factorizations},
+                 {"distortion", opt.surface ? "surface_arap" : "volume_arap"},
                  {"volume_barrier_weight", dr.volume_barrier_weight}};
       pj["rotation"] = json::array();
       for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
@@ -378,6 +418,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                         {"e1", h.e1}, {"e_arap", h.e_arap}, {"error_d", h.error_d}, {"l1_quality", h.l1_quality},
                         {"step", h.step}, {"seconds", h.seconds}});
       pj["history"] = hist;
+      if (!input_closed) pj["border_l1_quality"] = dr.border_quality;
       pj["options"] = {{"alpha0", opt.deform.alpha0}, {"eps0", opt.deform.eps0}, {"eps_min", opt.deform.eps_min},
                        {"beta", opt.deform.beta}, {"barrier_weight", opt.deform.barrier_weight},
                        {"max_alpha_steps", opt.deform.max_alpha_steps},
@@ -408,7 +449,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       json& pj = report["polycube"];
       pj["deformed_arap_distortion"] = dr.arap;
       {
-        const chart::Distortion di = chart::isometric_distortion(tm.V, dr.X, tm.T);
+        const chart::Distortion di = opt.surface ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
+                                                 : chart::isometric_distortion(tm.V, dr.X, tm.T);
         pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
       }
       pj["charts"] = ex.charts.charts;
@@ -463,7 +505,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
-      {
+      if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
         // the same orientation in a row (the polycube overlaps itself there).
         const std::array<int, 3> o = hex::overlap_lines(rr.X, tm.boundary, ex.labels);
@@ -553,6 +595,45 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
       hooks.report("polycube", 1);
 
+      // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
+      auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, const json& grid,
+                             const json& extra) {
+        MeshData qm;
+        qm.V = qr.V;
+        qm.Q = qr.Q;
+        io::write_medit(stage_path("quad.mesh"), qm);
+        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
+        io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
+        const hex::Hausdorff hd = hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
+        Eigen::AlignedBox3d box;
+        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+        json hist = json::array();
+        for (int c : qr.quality.histogram) hist.push_back(c);
+        report["quad"] = {{"count", qr.quality.count},
+                          {"vertices", qr.V.rows()},
+                          {"irregular_vertices", qr.irregular_vertices},
+                          {"corners", corners},
+                          {"feature_vertices", qr.feature_vertices},
+                          {"sj_min", qr.quality.sj_min},
+                          {"sj_mean", qr.quality.sj_mean},
+                          {"sj_max", qr.quality.sj_max},
+                          {"inverted", qr.quality.inverted},
+                          {"below_0_5", qr.quality.below_0_5},
+                          {"sj_histogram", hist},
+                          {"hausdorff", hd.max},
+                          {"hausdorff_rel", hd.max / box.diagonal().norm()},
+                          {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
+                          {"smooth_moves", qr.smooth_moves},
+                          {"grid", grid},
+                          {"seconds", sq.seconds()}};
+        report["quad"].update(extra);
+        report["timings"]["quad"] = sq.seconds();
+        hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
+                   std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
+                   ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " of the bbox diagonal");
+        hooks.report("quad", 1);
+      };
+
       // ---- hex --------------------------------------------------------------------------
       if (opt.until == Stage::Hex) {
         Stopwatch sh;
@@ -618,7 +699,27 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
 
       // ---- quad -------------------------------------------------------------------------
-      if (opt.until == Stage::Quad) {
+      if (opt.until == Stage::Quad && opt.surface) {
+        Stopwatch sq;
+        hooks.report("quad", 0);
+        hooks.info("extracting the quad mesh from the surface polycube");
+        double area = 0;
+        for (int f = 0; f < B.rows(); ++f)
+          area += 0.5 * (rr.X.row(B(f, 1)) - rr.X.row(B(f, 0))).cross(rr.X.row(B(f, 2)) - rr.X.row(B(f, 0))).norm();
+        const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
+        const double cpu = std::sqrt(target / area);
+        const quad::QuadResult qr =
+            quad::quad_mesh_from_surface_polycube(tm.V, B, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
+        if (qr.quality.inverted > 0)
+          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
+                                               " quads are folded or degenerate (min scaled Jacobian " +
+                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
+        write_quads(qr, ex.charts.corners, sq,
+                    {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
+                     {"snapping", "sorted_piecewise_linear"}},
+                    json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices}});
+      }
+      if (opt.until == Stage::Quad && !opt.surface) {
         Stopwatch sq;
         hooks.report("quad", 0);
         hooks.info("extracting the quad mesh of the surface");
@@ -648,39 +749,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
                                                " quads are folded or degenerate (min scaled Jacobian " +
                                                std::to_string(qr.quality.sj_min) + "); try another --quads");
-        MeshData qm;
-        qm.V = qr.V;
-        qm.Q = qr.Q;
-        io::write_medit(stage_path("quad.mesh"), qm);
-        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
-        io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
-        const hex::Hausdorff hd = hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
-        Eigen::AlignedBox3d box;
-        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
-        json hist = json::array();
-        for (int c : qr.quality.histogram) hist.push_back(c);
-        report["quad"] = {{"count", qr.quality.count},
-                          {"vertices", qr.V.rows()},
-                          {"irregular_vertices", qr.irregular_vertices},
-                          {"corners", ex.charts.corners},
-                          {"feature_vertices", qr.feature_vertices},
-                          {"sj_min", qr.quality.sj_min},
-                          {"sj_mean", qr.quality.sj_mean},
-                          {"sj_max", qr.quality.sj_max},
-                          {"inverted", qr.quality.inverted},
-                          {"below_0_5", qr.quality.below_0_5},
-                          {"sj_histogram", hist},
-                          {"hausdorff", hd.max},
-                          {"hausdorff_rel", hd.max / box.diagonal().norm()},
-                          {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
-                          {"smooth_moves", qr.smooth_moves},
-                          {"grid", {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
-                                    {"optimized", report_grid_optimized}}},
-                          {"seconds", sq.seconds()}};
-        report["timings"]["quad"] = sq.seconds();
-        hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
-                   std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
-                   ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " of the bbox diagonal");
+        write_quads(qr, ex.charts.corners, sq,
+                    {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
+                     {"optimized", report_grid_optimized}},
+                    json::object());
         hooks.report("quad", 1);
       }
     }

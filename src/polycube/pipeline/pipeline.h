@@ -34,6 +34,11 @@ struct PipelineOptions {
   std::string example;         ///< built-in example name (see examples::list())
   double example_mesh_size = 0.04;  ///< example surface edge length, fraction of the bbox diagonal
   std::string out_dir = "out";  ///< output folder, created if missing
+  /// Surface mode (paper Section 5.3): no tetrahedralization; the surface deforms with the surface
+  /// ARAP distortion, the polycube is a surface polycube, and the quads come straight from it.
+  /// Open surfaces are accepted (their borders become axis-aligned and stay in the quad mesh).
+  /// Hexes need the volume: Stage::Hex is refused.
+  bool surface = false;
   Stage until = Stage::Tet;    ///< stop after this stage
   bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
   io::CadOptions cad;
@@ -51,7 +56,7 @@ struct PipelineOptions {
   constraints::ConstraintOptions constraint;
   chart::ExtractOptions polycube;
   hex::HexOptions hex;
-  /// Quad stage: approximate quad count (0 = the hex stage's resolution) and smoothing.
+  /// Quad stage: approximate quad count (0 = the hex stage's resolution; in surface mode 2000) and smoothing.
   int target_quads = 0;
   quad::QuadOptions quad;
 };

@@ -277,6 +277,7 @@ SurfaceReport validate_surface(MeshData& m, SurfaceLayout& layout, const Validat
   // 9. Components and consistent orientation (BFS across manifold edges).
   std::vector<std::vector<int>> adj(nf);  // (neighbour face, same_direction) packed as 2*g + same
   for (auto [b, e] : groups) {
+    if (e - b != 2) continue;  // a border edge (allow_open): no neighbour across it
     const HalfEdge& x = he[b];
     const HalfEdge& y = he[b + 1];
     bool same = x.forward == y.forward;  // same traversal direction = inconsistent pair
