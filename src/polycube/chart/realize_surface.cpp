@@ -230,54 +230,8 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     yy = y;
     return X;
   };
-  std::array<Eigen::VectorXd, 3> y_start = y;
-  int its = 0;
-  MatX3d X = arap(y_start, false, its);
-  r.iterations = its;
-  int bad = misoriented(X);
-  hooks.debug("surface realization from the deformed surface: " + std::to_string(its) + " local/global iterations, " +
-              std::to_string(bad) + " misoriented triangles");
-  if (bad > 0) {
-    // Second start: every coordinate that no plane holds harmonic (uniform weights, a Tutte-like
-    // layout of each chart between its borders), planes at their heights; then ARAP iterations
-    // that never add a misoriented triangle.
-    std::vector<Eigen::Triplet<double>> ut;
-    for (const auto& [a, b] : unique_edges(F)) {
-      ut.emplace_back(a, a, 1.0);
-      ut.emplace_back(b, b, 1.0);
-      ut.emplace_back(a, b, -1.0);
-      ut.emplace_back(b, a, -1.0);
-    }
-    SpMat U(n, n);
-    U.setFromTriplets(ut.begin(), ut.end());
-    std::array<Eigen::VectorXd, 3> y2 = y_start;
-    for (int k = 0; k < 3; ++k) {
-      // Plane unknowns [0, planes) held at their heights by a stiff penalty; the rest harmonic.
-      SpMat A = S[k].transpose() * U * S[k];
-      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(nvar[k]);
-      const double stiff = 1e8;
-      for (int i = 0; i < r.planes[k]; ++i) {
-        A.coeffRef(i, i) += stiff;
-        rhs[i] = stiff * y_start[k][i];
-      }
-      Eigen::SimplicialLDLT<SpMat> h(A);
-      if (h.info() == Eigen::Success) {
-        y2[k] = h.solve(rhs);
-        for (int i = 0; i < r.planes[k]; ++i) y2[k][i] = y_start[k][i];
-      }
-    }
-    int its2 = 0;
-    MatX3d X2 = arap(y2, true, its2);
-    const int bad2 = misoriented(X2);
-    hooks.debug("surface realization from the harmonic start: " + std::to_string(its2) +
-                " local/global iterations, " + std::to_string(bad2) + " misoriented triangles");
-    if (bad2 < bad) {
-      X = std::move(X2);
-      r.iterations = its2;
-      r.start = "surface_harmonic";
-    }
-  }
-  if (misoriented(X) > 0) {
+  auto untangle = [&](MatX3d& X) {
+    if (misoriented(X) == 0) return;
     // Elliptic untangling (Garanzha et al. 2021, 2D) of the chart layouts: every triangle in its
     // chart's plane, mirrored for negative labels so that facing its label = positive area; plane
     // heights fixed, the other unknowns free; L-BFGS preconditioned by the ARAP factorizations,
@@ -415,17 +369,77 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       if (m == 0) break;
     }
     MatX3d Xu = to_X(z);
-    if (misoriented(Xu) < misoriented(X)) {
-      X = std::move(Xu);
-      r.untangle_iterations = total;
-      // ARAP iterations from the untangled layout, never adding a misoriented triangle.
-      std::array<Eigen::VectorXd, 3> yu;
-      for (int k = 0; k < 3; ++k) yu[k] = z.segment(off[k], nvar[k]);
-      int its3 = 0;
-      X = arap(yu, true, its3);
-      r.iterations = its3;
-      r.start += "+untangled";
+    r.untangle_iterations += total;
+    if (misoriented(Xu) < misoriented(X)) X = std::move(Xu);
+  };
+  // Starts, in order, until one ends with every triangle facing its label:
+  //  1. the deformed surface with every plane at its height (each triangle of the deformed
+  //     surface faces its label, so only triangles near chart borders, whose vertices moved onto
+  //     the other chart's plane, can fold), untangled if needed;
+  //  2. ARAP iterations from it (unguarded), untangled if needed;
+  //  3. every coordinate no plane holds harmonic (uniform weights: a Tutte-like layout of each
+  //     chart between its borders), untangled if needed.
+  // Each start that ends flip-free is finished by ARAP iterations that never fold a triangle.
+  const std::array<Eigen::VectorXd, 3> y_start = y;
+  int its = 0;
+  auto finish = [&](MatX3d& X, const char* name) {
+    std::array<Eigen::VectorXd, 3> yy;
+    for (int k = 0; k < 3; ++k) {
+      yy[k].resize(nvar[k]);
+      for (int v = 0; v < n; ++v) yy[k][var[k][v]] = X(v, k);
     }
+    untangle(X);
+    const int m = misoriented(X);
+    hooks.debug(std::string("surface realization, start ") + name + ": " + std::to_string(m) +
+                " misoriented triangles after untangling");
+    if (m > 0) return m;
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v) yy[k][var[k][v]] = X(v, k);
+    X = arap(yy, true, its);
+    r.iterations = its;
+    r.start = name;
+    return 0;
+  };
+  y = y_start;
+  MatX3d X = positions();
+  MatX3d X_start = X;
+  int bad = finish(X, "surface_deformed");
+  if (bad > 0) {
+    std::array<Eigen::VectorXd, 3> y1 = y_start;
+    MatX3d X1 = arap(y1, false, its);
+    const int bad1 = finish(X1, "surface_arap");
+    if (bad1 < bad) X = std::move(X1), bad = bad1;
+  }
+  if (bad > 0) {
+    std::vector<Eigen::Triplet<double>> ut;
+    for (const auto& [a, b] : unique_edges(F)) {
+      ut.emplace_back(a, a, 1.0);
+      ut.emplace_back(b, b, 1.0);
+      ut.emplace_back(a, b, -1.0);
+      ut.emplace_back(b, a, -1.0);
+    }
+    SpMat U(n, n);
+    U.setFromTriplets(ut.begin(), ut.end());
+    std::array<Eigen::VectorXd, 3> y2 = y_start;
+    for (int k = 0; k < 3; ++k) {
+      // Plane unknowns [0, planes) held at their heights by a stiff penalty; the rest harmonic.
+      SpMat A = S[k].transpose() * U * S[k];
+      Eigen::VectorXd rhs = Eigen::VectorXd::Zero(nvar[k]);
+      const double stiff = 1e8;
+      for (int i = 0; i < r.planes[k]; ++i) {
+        A.coeffRef(i, i) += stiff;
+        rhs[i] = stiff * y_start[k][i];
+      }
+      Eigen::SimplicialLDLT<SpMat> h(A);
+      if (h.info() == Eigen::Success) {
+        y2[k] = h.solve(rhs);
+        for (int i = 0; i < r.planes[k]; ++i) y2[k][i] = y_start[k][i];
+      }
+    }
+    y = y2;
+    MatX3d X2 = positions();
+    const int bad2 = finish(X2, "surface_harmonic");
+    if (bad2 < bad) X = std::move(X2), bad = bad2;
   }
   const double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
 
