@@ -311,7 +311,7 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     int best = misoriented(X), since_best = 0, total = 0;
     Eigen::VectorXd g, gt;
     energy(z, eps, nullptr);
-    for (int round = 0; round < 60 && best > 0 && since_best < 15; ++round) {
+    for (int round = 0; round < 30 && best > 0 && since_best < 8; ++round) {
       double E = energy(z, eps, &g);
       const double E0 = E;
       std::vector<Eigen::VectorXd> Sv, Yv;
