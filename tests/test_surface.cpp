@@ -224,7 +224,9 @@ TEST(SurfaceQuads, OpenCylinderKeepsItsTwoBorderLoops) {
   // Border vertices on the input border circles (z = 0 or 2, radius 1 up to the chords).
   for (int v = 0; v < q.V.rows(); ++v) {
     const Vec3 p = q.V.row(v).transpose();
-    if (std::abs(p.z()) < 1e-9 || std::abs(p.z() - 2) < 1e-9) EXPECT_GT(std::hypot(p.x(), p.y()), 0.99);
+    if (std::abs(p.z()) < 1e-9 || std::abs(p.z() - 2) < 1e-9) {
+      EXPECT_GT(std::hypot(p.x(), p.y()), 0.99);
+    }
   }
   int on_border = 0;
   for (int v = 0; v < q.V.rows(); ++v) on_border += std::abs(q.V(v, 2)) < 1e-9 || std::abs(q.V(v, 2) - 2) < 1e-9;

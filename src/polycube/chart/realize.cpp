@@ -12,6 +12,7 @@
 #include <numeric>
 
 #include "polycube/chart/labeling.h"
+#include "polycube/core/lbfgs.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
 #include "polycube/tetra/tetrahedralize.h"
@@ -300,71 +301,19 @@ class Realizer {
     int best = inverted, since_best = 0;
     constexpr int patience = 6;  // rounds without fewer inverted tets before giving up
     for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience; ++round) {
-      // L-BFGS at this eps.
-      constexpr int m = 8;
-      std::vector<Eigen::VectorXd> S, Yv;
-      std::vector<double> rho;
-      Eigen::VectorXd g, gt;
-      double E = evaluate(z, eps, &g);
-      const double E0 = E;
-      for (int it = 0; it < max_inner; ++it, ++total) {
-        // Two-loop recursion with H0 = gamma K^-1.
-        Eigen::VectorXd q = g;
-        std::vector<double> a(S.size());
-        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
-          a[i] = rho[i] * S[i].dot(q);
-          q -= a[i] * Yv[i];
-        }
-        Eigen::VectorXd r = precondition(q);
-        if (!S.empty()) {
-          const Eigen::VectorXd Ky = precondition(Yv.back());
-          r *= S.back().dot(Yv.back()) / std::max(Yv.back().dot(Ky), 1e-300);
-        }
-        for (size_t i = 0; i < S.size(); ++i) {
-          const double b = rho[i] * Yv[i].dot(r);
-          r += (a[i] - b) * S[i];
-        }
-        Eigen::VectorXd d = -r;
-        double slope = d.dot(g);
-        if (!(slope < 0)) {  // not a descent direction: restart with the preconditioned gradient
-          S.clear(), Yv.clear(), rho.clear();
-          d = -precondition(g);
-          slope = d.dot(g);
-          if (!(slope < 0)) break;
-        }
-        double step = 1, Et = E;
-        bool ok = false;
-        for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
-          Et = evaluate(z + step * d, eps, &gt);
-          if (Et <= E + 1e-4 * step * slope) {
-            ok = true;
-            break;
-          }
-        }
-        if (!ok) break;
-        const Eigen::VectorXd sv = step * d, yv = gt - g;
-        z += sv;
-        const double decrease = E - Et;
-        E = Et;
-        g = gt;
-        const double sy = sv.dot(yv);
-        if (sy > 1e-300) {
-          if (static_cast<int>(S.size()) == m) S.erase(S.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
-          S.push_back(sv);
-          Yv.push_back(yv);
-          rho.push_back(1 / sy);
-        }
-        // The inverted tets are few and local: a global relative test would stop long before
-        // they are repaired, so run until they are gone or the energy stops moving at all.
-        if (decrease < 1e-13 * std::abs(E)) break;
-        if (it % 10 == 9) {
-          to_X(z, Y);
-          if (count_inverted(Y, T_, arap_rest_) == 0) {
-            ++total;
-            break;
-          }
-        }
-      }
+      // L-BFGS at this eps. The inverted tets are few and local: a global relative test would stop
+      // long before they are repaired, so run until they are gone or the energy stops moving at all.
+      double E = 0;
+      const double E0 = evaluate(z, eps, nullptr);
+      LbfgsOptions lo;
+      lo.max_iterations = max_inner;
+      total += lbfgs_minimize(
+          z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* g) { return evaluate(zz, eps, g); }, precondition, lo, E,
+          [&](int it) {
+            if (it % 10 != 9) return false;
+            to_X(z, Y);
+            return count_inverted(Y, T_, arap_rest_) == 0;
+          });
       to_X(z, Y);
       inverted = count_inverted(Y, T_, arap_rest_);
       dmin = min_det(Y);
@@ -624,6 +573,23 @@ Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4
   d.mean = wsum > 0 ? d.mean / wsum : 0;
   if (T.rows() == 0) d.min = 0;
   return d;
+}
+
+void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult& r) {
+  r.planarity_error = 0;
+  r.misoriented_faces = 0;
+  const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+  for (int f = 0; f < B.rows(); ++f) {
+    const int k = labels[f] / 2;
+    double lo = r.X(B(f, 0), k), hi = lo;
+    for (int j = 1; j < 3; ++j) {
+      lo = std::min(lo, r.X(B(f, j), k));
+      hi = std::max(hi, r.X(B(f, j), k));
+    }
+    r.planarity_error = std::max(r.planarity_error, (hi - lo) / diag);
+    const Vec3 N = deform::area_normal(r.X, B(f, 0), B(f, 1), B(f, 2));
+    if (!(N.dot(label_direction(labels[f])) > 1e-14 * diag * diag)) r.misoriented_faces++;
+  }
 }
 
 RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
@@ -909,18 +875,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   r.rest = std::move(rest);
   r.T = std::move(T);
   r.inverted = count_inverted(r.X, r.T, solver.arap_rest());
-  const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
-  for (int f = 0; f < B.rows(); ++f) {
-    const int k = labels[f] / 2;
-    double lo = r.X(B(f, 0), k), hi = lo;
-    for (int j = 1; j < 3; ++j) {
-      lo = std::min(lo, r.X(B(f, j), k));
-      hi = std::max(hi, r.X(B(f, j), k));
-    }
-    r.planarity_error = std::max(r.planarity_error, (hi - lo) / diag);
-    const Vec3 N = deform::area_normal(r.X, B(f, 0), B(f, 1), B(f, 2));
-    if (!(N.dot(label_direction(labels[f])) > 1e-14 * diag * diag)) r.misoriented_faces++;
-  }
+  check_faces(B, labels, r);
   r.isometric = isometric_distortion(r.rest, r.X, r.T);
   r.seconds = sw.seconds();
   hooks.report("polycube", 1.0);

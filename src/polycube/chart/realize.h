@@ -104,6 +104,10 @@ std::vector<int> border_directions(const MatX3d& X, const MatX3i& F, const std::
 /// Isometric distortion max(s1, 1/s2) of the map between triangles (rest -> X).
 Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, const MatX3i& F);
 
+/// Sets r.planarity_error (max extent of a triangle of B along its label's axis / bbox diagonal of
+/// r.X) and r.misoriented_faces (triangles not facing their label's direction, or of zero area).
+void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult& r);
+
 /// Isometric distortion statistics of the map rest -> X over tets T.
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);
 

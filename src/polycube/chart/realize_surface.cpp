@@ -9,6 +9,7 @@
 
 #include "polycube/chart/labeling.h"
 #include "polycube/chart/realize.h"
+#include "polycube/core/lbfgs.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
 
@@ -309,54 +310,14 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     };
     double eps = 1.0;
     int best = misoriented(X), since_best = 0, total = 0;
-    Eigen::VectorXd g, gt;
     energy(z, eps, nullptr);
     for (int round = 0; round < 30 && best > 0 && since_best < 8; ++round) {
-      double E = energy(z, eps, &g);
-      const double E0 = E;
-      std::vector<Eigen::VectorXd> Sv, Yv;
-      std::vector<double> rho;
-      for (int it = 0; it < 300; ++it, ++total) {
-        // Two-loop recursion with the ARAP preconditioner as the initial inverse Hessian.
-        Eigen::VectorXd qv = g;
-        std::vector<double> al(Sv.size());
-        for (int i = static_cast<int>(Sv.size()) - 1; i >= 0; --i) {
-          al[i] = rho[i] * Sv[i].dot(qv);
-          qv -= al[i] * Yv[i];
-        }
-        Eigen::VectorXd d = precondition(qv);
-        for (size_t i = 0; i < Sv.size(); ++i) d += Sv[i] * (al[i] - rho[i] * Yv[i].dot(d));
-        d = -d;
-        double slope = d.dot(g);
-        if (!(slope < 0)) {
-          Sv.clear(), Yv.clear(), rho.clear();
-          d = -precondition(g);
-          slope = d.dot(g);
-          if (!(slope < 0)) break;
-        }
-        double step = 1, Et = E;
-        bool ok = false;
-        for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
-          Et = energy(z + step * d, eps, &gt);
-          if (Et <= E + 1e-4 * step * slope) {
-            ok = true;
-            break;
-          }
-        }
-        if (!ok) break;
-        const Eigen::VectorXd sv = step * d, yv = gt - g;
-        z += sv;
-        const double decrease = E - Et;
-        E = Et;
-        g = gt;
-        if (sv.dot(yv) > 1e-300) {
-          if (Sv.size() == 8) Sv.erase(Sv.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
-          Sv.push_back(sv);
-          Yv.push_back(yv);
-          rho.push_back(1 / sv.dot(yv));
-        }
-        if (decrease < 1e-13 * std::abs(E)) break;
-      }
+      const double E0 = energy(z, eps, nullptr);
+      double E = E0;
+      LbfgsOptions lo;
+      lo.max_iterations = 300;
+      total += lbfgs_minimize(
+          z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* gg) { return energy(zz, eps, gg); }, precondition, lo, E);
       energy(z, eps, nullptr);
       const int m = misoriented(to_X(z));
       hooks.debug("surface untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
@@ -448,18 +409,7 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
   r.T.resize(0, 4);
   r.X = std::move(X);
   r.arap = e_prev;
-  const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
-  for (int f = 0; f < F.rows(); ++f) {
-    const int k = labels[f] / 2;
-    double lo = r.X(F(f, 0), k), hi = lo;
-    for (int j = 1; j < 3; ++j) {
-      lo = std::min(lo, r.X(F(f, j), k));
-      hi = std::max(hi, r.X(F(f, j), k));
-    }
-    r.planarity_error = std::max(r.planarity_error, (hi - lo) / diag);
-    const Vec3 N = deform::area_normal(r.X, F(f, 0), F(f, 1), F(f, 2));
-    if (!(N.dot(label_direction(labels[f])) > 1e-14 * diag * diag)) r.misoriented_faces++;
-  }
+  check_faces(F, labels, r);
   for (size_t i = 0; i < bedges.size(); ++i) {
     const Vec3 e = (r.X.row(bedges[i][1]) - r.X.row(bedges[i][0])).transpose();
     if (!(e[bdir[i]] != 0)) r.degenerate_border_edges++;

@@ -320,29 +320,39 @@ double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
   return weight * E;
 }
 
+double smoothed_l1(const Vec3& v, double eps, Vec3* grad, Eigen::Matrix3d* hess) {
+  const double v2 = v.squaredNorm();
+  double h = 0;
+  if (grad) grad->setZero();
+  if (hess) hess->setZero();
+  for (int k = 0; k < 3; ++k) {
+    const double s = std::sqrt(v[k] * v[k] + eps * v2);
+    h += s;
+    if (s <= 0 || (!grad && !hess)) continue;
+    Vec3 q = eps * v;
+    q[k] += v[k];
+    if (grad) *grad += q / s;
+    if (hess) {
+      Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
+      M(k, k) += 1;
+      *hess += M / s - q * q.transpose() / (s * s * s);
+    }
+  }
+  return h;
+}
+
 double border_l1_energy(const MatX3d& X, const std::vector<std::array<int, 2>>& edges, double h, double eps,
                         double weight, Eigen::VectorXd* grad, HessianSink* hess) {
   double E = 0;
   const double ceps = std::sqrt(1 + eps) + 2 * std::sqrt(eps);
   for (const auto& ab : edges) {
     const Vec3 e = row(X, ab[1]) - row(X, ab[0]);
-    const double e2 = e.squaredNorm();
-    Vec3 dg = Vec3::Zero();
-    Eigen::Matrix3d Hg = Eigen::Matrix3d::Zero();
-    for (int k = 0; k < 3; ++k) {
-      const double s = std::sqrt(e[k] * e[k] + eps * e2);
-      E += s;
-      if (s <= 0 || (!grad && !hess)) continue;
-      Vec3 q = eps * e;
-      q[k] += e[k];
-      dg += q / s;
-      Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
-      M(k, k) += 1;
-      Hg += M / s - q * q.transpose() / (s * s * s);
-    }
+    Vec3 dg;
+    Eigen::Matrix3d Hg;
+    E += smoothed_l1(e, eps, &dg, &Hg);
     // Minus c_eps |e|, the value for an axis-aligned edge: zero when aligned, and shrinking the
     // border no longer pays. Its Hessian (negative) is left out of the approximation.
-    const double len = std::sqrt(e2);
+    const double len = e.norm();
     E -= ceps * len;
     if (len > 0) dg -= ceps * e / len;
     const double c = weight * h;

@@ -93,6 +93,10 @@ struct SurfaceArapRest {
 double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
                            Eigen::VectorXd* grad, HessianSink* hess, std::vector<double>* per_face = nullptr);
 
+/// sum_k sqrt(v_k^2 + eps |v|^2), the smoothed l1 norm of one vector, with (when asked) its gradient
+/// and Hessian in v: exact, and PSD (each term is the norm of a linear map of v).
+double smoothed_l1(const Vec3& v, double eps, Vec3* grad, Eigen::Matrix3d* hess);
+
 /// Open surfaces (the paper's inset of Section 5.3): smoothed l1 norm of the border edges,
 ///   sum_e h [sum_k sqrt(e_k^2 + eps |e|^2) - c_eps |e|],   e = x_b - x_a,
 /// c_eps = sqrt(1 + eps) + 2 sqrt(eps) its value for an axis-aligned unit edge, so each term is

@@ -41,20 +41,9 @@ double rotation_objective(const std::vector<Vec3>& N, double eps, Vec3* grad, Ei
   if (grad) grad->setZero();
   if (hess) hess->setZero();
   for (const Vec3& n : N) {
-    const double n2 = n.squaredNorm();
-    Vec3 dg = Vec3::Zero();
-    Eigen::Matrix3d Hg = Eigen::Matrix3d::Zero();
-    for (int k = 0; k < 3; ++k) {
-      const double s = std::sqrt(n[k] * n[k] + eps * n2);
-      h += s;
-      if (s <= 0 || (!grad && !hess)) continue;
-      Vec3 q = eps * n;
-      q[k] += n[k];
-      dg += q / s;
-      Eigen::Matrix3d M = eps * Eigen::Matrix3d::Identity();
-      M(k, k) += 1;
-      Hg += M / s - q * q.transpose() / (s * s * s);
-    }
+    Vec3 dg;
+    Eigen::Matrix3d Hg;
+    h += smoothed_l1(n, eps, grad || hess ? &dg : nullptr, hess ? &Hg : nullptr);
     if (grad) *grad += n.cross(dg);  // d/dw g(N + w x N) = N x dg
     if (hess) {
       const Eigen::Matrix3d Jn = -skew(n);  // d(w x N)/dw = -[N]x

@@ -218,25 +218,27 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       Stopwatch st;
       hooks.report("tet", 0);
       json tj;
+      // --edge-length: the surface remeshed (and validated again) first; `used_layout` follows it.
+      SurfaceMesh used = surface;
+      SurfaceLayout used_layout = layout;
+      const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
+      const double el = opt.tet.edge_length * diag;
+      if (el > 0 && !have_tets) {
+        if (!input_closed)
+          throw Error(ErrorKind::Usage, "--edge-length remeshes closed surfaces only; this one has " +
+                                            std::to_string(report["input"]["border_loops"].get<int>()) +
+                                            " border loops (remesh it beforehand, or drop --edge-length)");
+        hooks.info("remeshing the surface to edge length " + std::to_string(el));
+        used = remesh_surface(surface, layout, el);
+        MeshData rm = make_mesh_data(used.V, used.F, "remeshed");
+        rm.path = "remeshed surface";
+        validate_surface(rm, used_layout, opt.validate);
+        used.V = rm.V;
+        used.F = rm.F;
+      }
       if (opt.surface) {
         // Surface mode: no tets; the (possibly remeshed) surface is the mesh that deforms.
-        SurfaceMesh used = surface;
-        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
-        const double el = opt.tet.edge_length * diag;
-        if (el > 0) {
-          if (!input_closed)
-            throw Error(ErrorKind::Usage, "--edge-length remeshes closed surfaces only; this one has " +
-                                              std::to_string(report["input"]["border_loops"].get<int>()) +
-                                              " border loops (remesh it beforehand, or drop --edge-length)");
-          hooks.info("remeshing the surface to edge length " + std::to_string(el));
-          SurfaceLayout used_layout = layout;
-          used = remesh_surface(surface, layout, el);
-          MeshData rm = make_mesh_data(used.V, used.F, "remeshed");
-          rm.path = "remeshed surface";
-          validate_surface(rm, used_layout, opt.validate);
-          used.V = rm.V;
-          used.F = rm.F;
-        } else {
+        if (el <= 0) {
           surf_to_tet.resize(surface.V.rows());
           std::iota(surf_to_tet.begin(), surf_to_tet.end(), 0);
         }
@@ -250,19 +252,6 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj = tet_json(tm, measure_tets(tm.V, tm.T));
         tj["source"] = "input";
       } else {
-        SurfaceMesh used = surface;
-        SurfaceLayout used_layout = layout;
-        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
-        double el = opt.tet.edge_length * diag;
-        if (el > 0) {
-          hooks.info("remeshing the surface to edge length " + std::to_string(el));
-          used = remesh_surface(surface, layout, el);
-          MeshData rm = make_mesh_data(used.V, used.F, "remeshed");
-          rm.path = "remeshed surface";
-          validate_surface(rm, used_layout, opt.validate);
-          used.V = rm.V;
-          used.F = rm.F;
-        }
         TetStats stats;
         hooks.info("tetrahedralizing (" + opt.tet.algorithm + ")");
         tm = tetrahedralize(used, used_layout, opt.tet, hooks, &stats);
@@ -598,6 +587,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
       auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, const json& grid,
                              const json& extra) {
+        if (qr.quality.inverted > 0)
+          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
+                                               " quads are folded or degenerate (min scaled Jacobian " +
+                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
         MeshData qm;
         qm.V = qr.V;
         qm.Q = qr.Q;
@@ -710,10 +703,6 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         const double cpu = std::sqrt(target / area);
         const quad::QuadResult qr =
             quad::quad_mesh_from_surface_polycube(tm.V, B, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
-        if (qr.quality.inverted > 0)
-          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
-                                               " quads are folded or degenerate (min scaled Jacobian " +
-                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}},
@@ -745,10 +734,6 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
           report_grid_optimized = true;
         }
-        if (qr.quality.inverted > 0)
-          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
-                                               " quads are folded or degenerate (min scaled Jacobian " +
-                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
                      {"optimized", report_grid_optimized}},

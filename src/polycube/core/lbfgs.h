@@ -1,0 +1,79 @@
+// Preconditioned L-BFGS with Armijo backtracking, for the untangling energies (chart/realize*.cpp).
+#pragma once
+#include <Eigen/Core>
+#include <algorithm>
+#include <functional>
+#include <vector>
+
+namespace polycube {
+
+struct LbfgsOptions {
+  int memory = 8;                ///< correction pairs kept
+  int max_iterations = 300;      ///< accepted steps at most
+  double decrease_tol = 1e-13;   ///< stop when a step lowers the energy by less than this, relatively
+};
+
+/// Minimizes f from z (updated in place) by L-BFGS (two-loop recursion with H0 = gamma P^-1, P^-1
+/// applied by `precondition`), each step backtracked until the Armijo condition holds. f(z, g)
+/// returns the energy and fills g when it is non-null. `stop(iteration)`, if given, is asked after
+/// every accepted step whether to end. A direction that does not descend restarts from the
+/// preconditioned gradient. Returns the accepted steps; E receives the final energy.
+inline int lbfgs_minimize(Eigen::VectorXd& z, const std::function<double(const Eigen::VectorXd&, Eigen::VectorXd*)>& f,
+                          const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& precondition,
+                          const LbfgsOptions& opt, double& E, const std::function<bool(int)>& stop = {}) {
+  std::vector<Eigen::VectorXd> S, Yv;
+  std::vector<double> rho;
+  Eigen::VectorXd g, gt;
+  E = f(z, &g);
+  int it = 0;
+  while (it < opt.max_iterations) {
+    Eigen::VectorXd q = g;
+    std::vector<double> a(S.size());
+    for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
+      a[i] = rho[i] * S[i].dot(q);
+      q -= a[i] * Yv[i];
+    }
+    Eigen::VectorXd r = precondition(q);
+    if (!S.empty()) {
+      const Eigen::VectorXd Ky = precondition(Yv.back());
+      r *= S.back().dot(Yv.back()) / std::max(Yv.back().dot(Ky), 1e-300);
+    }
+    for (size_t i = 0; i < S.size(); ++i) r += (a[i] - rho[i] * Yv[i].dot(r)) * S[i];
+    Eigen::VectorXd d = -r;
+    double slope = d.dot(g);
+    if (!(slope < 0)) {
+      S.clear(), Yv.clear(), rho.clear();
+      d = -precondition(g);
+      slope = d.dot(g);
+      if (!(slope < 0)) break;
+    }
+    double step = 1, Et = E;
+    bool ok = false;
+    for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+      Et = f(z + step * d, &gt);
+      if (Et <= E + 1e-4 * step * slope) {
+        ok = true;
+        break;
+      }
+    }
+    if (!ok) break;
+    const Eigen::VectorXd sv = step * d, yv = gt - g;
+    z += sv;
+    const double decrease = E - Et;
+    E = Et;
+    g = gt;
+    ++it;
+    const double sy = sv.dot(yv);
+    if (sy > 1e-300) {
+      if (static_cast<int>(S.size()) == opt.memory) S.erase(S.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
+      S.push_back(sv);
+      Yv.push_back(yv);
+      rho.push_back(1 / sy);
+    }
+    if (decrease < opt.decrease_tol * std::abs(E)) break;
+    if (stop && stop(it - 1)) break;
+  }
+  return it;
+}
+
+}  // namespace polycube
