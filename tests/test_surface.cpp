@@ -118,6 +118,22 @@ void expect_exact_polycube(const SurfaceMesh& s, const chart::PolycubeExtraction
 
 }  // namespace
 
+TEST(SurfacePolycube, EdgeFlipUnfoldsATriangle) {
+  // Two triangles of one +Z chart: (0, 1, 2) folded (2 on the wrong side of edge 0-1), (1, 0, 3)
+  // facing +Z; flipping their shared edge gives (2, 0, 3) and (2, 3, 1), both facing +Z.
+  MatX3d X(4, 3);
+  X << 0, 0, 0, 1, 0, 0, 0.5, -0.2, 0, 0.5, -1, 0;
+  MatX3i F(2, 3);
+  F << 0, 1, 2, 1, 0, 3;
+  const std::vector<int> labels = {kPosZ, kPosZ};
+  EXPECT_EQ(chart::flip_folded_edges(X, F, labels), 1);
+  for (int f = 0; f < 2; ++f) EXPECT_GT(deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2)).z(), 0) << f;
+  // Triangles of different charts are never flipped.
+  MatX3i G(2, 3);
+  G << 0, 1, 2, 1, 0, 3;
+  EXPECT_EQ(chart::flip_folded_edges(X, G, {kPosZ, kNegY}), 0);
+}
+
 TEST(SurfacePolycube, SphereGivesACube) {
   const auto s = sphere(4);
   const auto e = surface_polycube(s);

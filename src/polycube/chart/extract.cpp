@@ -1,8 +1,10 @@
 #include "polycube/chart/extract.h"
 
 #include <algorithm>
+#include <map>
 
 #include "polycube/core/topology.h"
+#include "polycube/deform/energies.h"
 
 namespace polycube::chart {
 
@@ -97,7 +99,71 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
     e.realized = realize_polycube(rest, T, B, deformed, e.labels, ro, hooks);
   }
+  if (T.rows() == 0 && !e.realized.success && e.realized.misoriented_faces > 0 &&
+      e.realized.misoriented_faces <= opt.max_flip_faces && e.realized.degenerate_border_edges == 0 &&
+      e.realized.X.rows() > 0) {
+    MatX3i F = B;
+    const int flips = flip_folded_edges(e.realized.X, F, e.labels);
+    RealizeResult r = e.realized;
+    check_faces(F, e.labels, r);
+    hooks.debug(std::to_string(flips) + " edge flips leave " + std::to_string(r.misoriented_faces) +
+                " folded triangles");
+    if (flips > 0 && r.misoriented_faces == 0) {
+      r.success = true;
+      r.failure.clear();
+      r.arap = deform::surface_arap_energy(r.X, F, deform::SurfaceArapRest::build(rest, F), 1.0, nullptr, nullptr);
+      r.isometric = isometric_distortion_surface(rest, r.X, F);
+      e.realized = std::move(r);
+      e.flipped_B = std::move(F);
+      e.edge_flips = flips;
+    }
+  }
   return e;
+}
+
+int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels) {
+  const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
+  auto faces_label = [&](int a, int b, int c, int label) {
+    return deform::area_normal(X, a, b, c).dot(label_direction(label)) > 1e-14 * diag * diag;
+  };
+  int flips = 0;
+  for (int pass = 0; pass < 5; ++pass) {
+    std::map<std::pair<int, int>, int> face_of;  // directed edge -> face
+    for (int f = 0; f < F.rows(); ++f)
+      for (int k = 0; k < 3; ++k) face_of[{F(f, k), F(f, (k + 1) % 3)}] = f;
+    int done = 0;
+    for (int t = 0; t < F.rows(); ++t) {
+      if (faces_label(F(t, 0), F(t, 1), F(t, 2), labels[t])) continue;
+      for (int k = 0; k < 3; ++k) {
+        const int a = F(t, k), b = F(t, (k + 1) % 3), c = F(t, (k + 2) % 3);
+        const auto it = face_of.find({b, a});
+        if (it == face_of.end()) continue;
+        const int u = it->second;
+        if (labels[u] != labels[t]) continue;
+        int d = -1;
+        for (int j = 0; j < 3; ++j)
+          if (F(u, j) != a && F(u, j) != b) d = F(u, j);
+        if (d < 0 || face_of.count({c, d}) || face_of.count({d, c})) continue;
+        // (a, b, c) + (b, a, d) -> (c, a, d) + (c, d, b)
+        if (!faces_label(c, a, d, labels[t]) || !faces_label(c, d, b, labels[t])) continue;
+        for (int j = 0; j < 3; ++j) {
+          face_of.erase({F(t, j), F(t, (j + 1) % 3)});
+          face_of.erase({F(u, j), F(u, (j + 1) % 3)});
+        }
+        F.row(t) << c, a, d;
+        F.row(u) << c, d, b;
+        for (int j = 0; j < 3; ++j) {
+          face_of[{F(t, j), F(t, (j + 1) % 3)}] = t;
+          face_of[{F(u, j), F(u, (j + 1) % 3)}] = u;
+        }
+        ++done;
+        break;
+      }
+    }
+    flips += done;
+    if (done == 0) break;
+  }
+  return flips;
 }
 
 }  // namespace polycube::chart

@@ -493,6 +493,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
+      if (opt.surface) pj["edge_flips"] = ex.edge_flips;
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
       if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
@@ -509,6 +510,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
 
       // Labels of the input triangles and polycube positions of the input vertices.
       const MatX3i& B = tm.boundary;
+      // The polycube's triangles: B, or in surface mode B with folded triangles' edges flipped.
+      const MatX3i& PB = ex.flipped_B.rows() > 0 ? ex.flipped_B : B;
       bool direct = static_cast<int>(surf_to_tet.size()) == surface.V.rows() && B.rows() == surface.F.rows();
       for (int f = 0; direct && f < B.rows(); ++f) {
         std::array<int, 3> a{surf_to_tet[surface.F(f, 0)], surf_to_tet[surface.F(f, 1)], surf_to_tet[surface.F(f, 2)]};
@@ -548,7 +551,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
       MeshData pm;
       pm.V = rr.X;
-      pm.F = B;
+      pm.F = PB;
       pm.T = rr.T;
       io::CellFields pf;
       pf["label"] = ex.labels;
@@ -560,7 +563,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       df["label"].resize(B.rows() + tm.T.rows(), -1);
       write_deformed_vtk(df);
       {
-        const SurfaceMesh ps = compact_surface(rr.X, B);  // the polycube's boundary alone
+        const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
         io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
       }
       io::write_obj(stage_path("map.obj"), map_V, surface.F);
@@ -702,7 +705,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
         const double cpu = std::sqrt(target / area);
         const quad::QuadResult qr =
-            quad::quad_mesh_from_surface_polycube(tm.V, B, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
+            quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}},
