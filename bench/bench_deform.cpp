@@ -16,6 +16,7 @@
 #include "polycube/deform/solver.h"
 #include "polycube/hex/extract.h"
 #include "polycube/io/readers.h"
+#include "polycube/quad/quad.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
 #include "polycube/validate/tetmesh.h"
@@ -29,6 +30,79 @@ struct Model {
   int tets;               // target tet count (the paper's when it has the model)
 };
 
+// Surface mode and its quads beside Table I (fandisk, rockerArm at the paper's quad counts; other
+// models at 2000 quads, without a paper row).
+int quad_bench(const std::string& shared, const std::vector<std::string>& only) {
+  struct QuadModel {
+    std::string file, paper_row;
+  };
+  const std::vector<QuadModel> models = {{"basic/sphere_coarse.obj", ""}, {"basic/torus.obj", ""},
+                                         {"basic/eight.off", ""},         {"cad/mambo_B3.stl", ""},
+                                         {"cad/fandisk.obj", "fandisk"},  {"cad/rocker.stl", "rockerArm"}};
+  std::map<std::string, std::vector<std::string>> paper;
+  {
+    std::ifstream in(shared + "/paper/table1_quad_quality.tsv");
+    std::string line;
+    while (std::getline(in, line)) {
+      std::vector<std::string> c;
+      std::stringstream ss(line);
+      std::string x;
+      while (std::getline(ss, x, '\t')) c.push_back(x);
+      if (c.size() >= 7) paper[c[0]] = c;
+    }
+  }
+  if (!fs::exists(shared + "/meshes")) {
+    std::printf("no meshes under %s/meshes: nothing to benchmark\n", shared.c_str());
+    return 0;
+  }
+  std::printf("| model | triangles | deform s | corners | quads | SJ min / mean / max | inverted | Hausdorff (1e-3) | "
+              "quad s | paper: quads | corners | SJ min / mean / max | Hausdorff |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  for (const QuadModel& m : models) {
+    if (!only.empty() && std::find(only.begin(), only.end(), fs::path(m.file).filename().string()) == only.end()) continue;
+    try {
+      MeshData in = io::read_mesh(shared + "/meshes/" + m.file);
+      SurfaceLayout l;
+      validate_surface(in, l);
+      const SurfaceMesh s{in.V, in.F};
+      int target = 2000;
+      std::string p[4] = {"-", "-", "-", "-"};
+      if (paper.count(m.paper_row)) {
+        const auto& c = paper[m.paper_row];
+        target = std::stoi(c[1]);
+        p[0] = c[1];
+        p[1] = c[2];
+        p[2] = c[3] + " / " + c[4] + " / " + c[5];
+        p[3] = c[6];
+      }
+      const deform::DeformResult r = deform::deform_surface_to_polycube(s.V, s.F, {});
+      const chart::PolycubeExtraction e = chart::extract_polycube(s.V, MatX4i(0, 4), s.F, r.X);
+      if (!e.realized.success) {
+        std::printf("| %s | %ld | %.1f | %d | failed: %s | | | | | %s | %s | %s | %s |\n", m.file.c_str(),
+                    (long)s.F.rows(), r.seconds, e.charts.corners, e.realized.failure.c_str(), p[0].c_str(),
+                    p[1].c_str(), p[2].c_str(), p[3].c_str());
+        continue;
+      }
+      const MatX3i& F = e.flipped_B.rows() > 0 ? e.flipped_B : s.F;
+      double area = 0;
+      for (int f = 0; f < F.rows(); ++f) area += deform::area_normal(e.realized.X, F(f, 0), F(f, 1), F(f, 2)).norm();
+      const quad::QuadResult q =
+          quad::quad_mesh_from_surface_polycube(s.V, F, e.realized.X, e.labels, std::sqrt(target / area), s);
+      const hex::Hausdorff hd = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), s.V, s.F);
+      Eigen::AlignedBox3d box;
+      for (int v = 0; v < s.V.rows(); ++v) box.extend(s.V.row(v).transpose());
+      std::printf("| %s | %ld | %.1f | %d | %d | %.3f / %.3f / %.3f | %d | %.2f | %.2f | %s | %s | %s | %s |\n",
+                  m.file.c_str(), (long)s.F.rows(), r.seconds, e.charts.corners, q.quality.count, q.quality.sj_min,
+                  q.quality.sj_mean, q.quality.sj_max, q.quality.inverted, 1e3 * hd.max / box.diagonal().norm(),
+                  q.seconds, p[0].c_str(), p[1].c_str(), p[2].c_str(), p[3].c_str());
+    } catch (const Error& err) {
+      std::printf("| %s | error: %s |\n", m.file.c_str(), err.what());
+    }
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   CLI::App app{"Benchmark of the polycube deformation and extraction against the paper's Table II"};
   std::string shared = POLYCUBE_SHARED_DIR;
@@ -39,7 +113,11 @@ int main(int argc, char** argv) {
   app.add_option("--runs", runs, "Runs per model (the median is reported)")->capture_default_str();
   app.add_option("--tet-scale", tet_scale, "Multiply every target tet count by this")->capture_default_str();
   app.add_option("--only", only, "Run only these models (file names)");
+  bool quad_table = false;
+  app.add_flag("--quad-table", quad_table,
+               "Instead: surface mode (--surface --quad) beside the paper's Table I, at its quad counts");
   CLI11_PARSE(app, argc, argv);
+  if (quad_table) return quad_bench(shared, only);
 
   const std::vector<Model> models = {
       {"basic/sphere_coarse.obj", "", 5000},  {"basic/torus.obj", "", 5000},

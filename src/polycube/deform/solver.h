@@ -47,8 +47,8 @@ struct DeformOptions {
   std::vector<EdgeConstraint> edges;  ///< user edge terms (Eqs. 12-13), on face_pairs(boundary)
   /// The SQP systems are solved by conjugate gradients preconditioned with the last Cholesky
   /// factorization, to this relative residual; a new factorization is made at each schedule step
-  /// and when CG needs more iterations than a quarter of a factorization's time (at least
-  /// cg_max_iterations).
+  /// and when CG needs more iterations than a tenth of a factorization's cost (CHOLMOD's flop
+  /// counts, so that a run does not depend on the machine's load; at least cg_max_iterations).
   double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
 };

@@ -133,6 +133,13 @@ bool SparseSystem::factorize() {
   return llt_->info() == Eigen::Success;
 }
 
+double SparseSystem::factor_to_cg_cost() const {
+  if (!llt_) return 0;
+  auto& c = const_cast<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>&>(*llt_).cholmod();
+  const double cg = 4.0 * c.lnz + 4.0 * static_cast<double>(values_.size());
+  return cg > 0 ? c.fl / cg : 0;
+}
+
 Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b) const { return llt_->solve(b); }
 
 Eigen::VectorXd SparseSystem::multiply(const Eigen::VectorXd& x) const {

@@ -31,6 +31,10 @@ class SparseSystem : public HessianSink {
 
   /// Numeric factorization (symbolic analysis on first call). False if not positive definite.
   bool factorize();
+  /// Cost model of the last factorization, from CHOLMOD's symbolic analysis (deterministic, unlike
+  /// timings): floating-point operations of a factorization over those of one preconditioned CG
+  /// iteration (two triangular solves with the factor and one product with the matrix).
+  double factor_to_cg_cost() const;
   Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
   /// y = A x with the current values (the factorization may be of older ones).
   Eigen::VectorXd multiply(const Eigen::VectorXd& x) const;
