@@ -30,6 +30,21 @@ struct Model {
   int tets;               // target tet count (the paper's when it has the model)
 };
 
+// Rows of one of the paper's tables (TSV), by model name (first column); the first row of a name wins.
+std::map<std::string, std::vector<std::string>> read_paper_table(const std::string& path) {
+  std::map<std::string, std::vector<std::string>> rows;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::vector<std::string> c;
+    std::stringstream ss(line);
+    std::string x;
+    while (std::getline(ss, x, '\t')) c.push_back(x);
+    if (!c.empty() && !rows.count(c[0])) rows[c[0]] = c;
+  }
+  return rows;
+}
+
 // Surface mode and its quads beside Table I (fandisk, rockerArm at the paper's quad counts; other
 // models at 2000 quads, without a paper row).
 int quad_bench(const std::string& shared, const std::vector<std::string>& only) {
@@ -39,18 +54,7 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only) 
   const std::vector<QuadModel> models = {{"basic/sphere_coarse.obj", ""}, {"basic/torus.obj", ""},
                                          {"basic/eight.off", ""},         {"cad/mambo_B3.stl", ""},
                                          {"cad/fandisk.obj", "fandisk"},  {"cad/rocker.stl", "rockerArm"}};
-  std::map<std::string, std::vector<std::string>> paper;
-  {
-    std::ifstream in(shared + "/paper/table1_quad_quality.tsv");
-    std::string line;
-    while (std::getline(in, line)) {
-      std::vector<std::string> c;
-      std::stringstream ss(line);
-      std::string x;
-      while (std::getline(ss, x, '\t')) c.push_back(x);
-      if (c.size() >= 7) paper[c[0]] = c;
-    }
-  }
+  auto paper = read_paper_table(shared + "/paper/table1_quad_quality.tsv");
   if (!fs::exists(shared + "/meshes")) {
     std::printf("no meshes under %s/meshes: nothing to benchmark\n", shared.c_str());
     return 0;
@@ -67,7 +71,7 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only) 
       const SurfaceMesh s{in.V, in.F};
       int target = 2000;
       std::string p[4] = {"-", "-", "-", "-"};
-      if (paper.count(m.paper_row)) {
+      if (paper.count(m.paper_row) && paper[m.paper_row].size() >= 7) {
         const auto& c = paper[m.paper_row];
         target = std::stoi(c[1]);
         p[0] = c[1];
@@ -127,18 +131,7 @@ int main(int argc, char** argv) {
       {"cad/rocker.stl", "rockerArm-1", 127746},
   };
   // Paper's Table II rows.
-  std::map<std::string, std::vector<std::string>> paper;
-  {
-    std::ifstream in(shared + "/paper/table2_quality_performance.tsv");
-    std::string line;
-    while (std::getline(in, line)) {
-      std::vector<std::string> c;
-      std::stringstream ss(line);
-      std::string x;
-      while (std::getline(ss, x, '\t')) c.push_back(x);
-      if (!c.empty() && !paper.count(c[0])) paper[c[0]] = c;
-    }
-  }
+  auto paper = read_paper_table(shared + "/paper/table2_quality_performance.tsv");
   std::vector<std::string> hex_rows;
   if (!fs::exists(shared + "/meshes")) {
     std::printf("no meshes under %s/meshes: nothing to benchmark\n", shared.c_str());
