@@ -157,7 +157,7 @@ TEST(SurfacePolycube, OpenCylinderKeepsItsBorderAxisAligned) {
   expect_exact_polycube(c, e);
   EXPECT_EQ(e.charts.charts, 4);
   // Every border edge runs along exactly one axis.
-  std::vector<std::array<int, 2>> edges;
+  std::vector<std::array<int, 3>> edges;
   chart::border_directions(e.realized.X, c.F, e.labels, &edges);
   ASSERT_EQ(edges.size(), 64u);
   for (const auto& ab : edges) {

@@ -123,9 +123,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
 
 int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels) {
   const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
-  auto faces_label = [&](int a, int b, int c, int label) {
-    return deform::area_normal(X, a, b, c).dot(label_direction(label)) > 1e-14 * diag * diag;
-  };
+  auto faces = [&](int a, int b, int c, int label) { return faces_label(X, a, b, c, label, diag); };
   int flips = 0;
   for (int pass = 0; pass < 5; ++pass) {
     std::map<std::pair<int, int>, int> face_of;  // directed edge -> face
@@ -133,7 +131,7 @@ int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels
       for (int k = 0; k < 3; ++k) face_of[{F(f, k), F(f, (k + 1) % 3)}] = f;
     int done = 0;
     for (int t = 0; t < F.rows(); ++t) {
-      if (faces_label(F(t, 0), F(t, 1), F(t, 2), labels[t])) continue;
+      if (faces(F(t, 0), F(t, 1), F(t, 2), labels[t])) continue;
       for (int k = 0; k < 3; ++k) {
         const int a = F(t, k), b = F(t, (k + 1) % 3), c = F(t, (k + 2) % 3);
         const auto it = face_of.find({b, a});
@@ -145,7 +143,7 @@ int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels
           if (F(u, j) != a && F(u, j) != b) d = F(u, j);
         if (d < 0 || face_of.count({c, d}) || face_of.count({d, c})) continue;
         // (a, b, c) + (b, a, d) -> (c, a, d) + (c, d, b)
-        if (!faces_label(c, a, d, labels[t]) || !faces_label(c, d, b, labels[t])) continue;
+        if (!faces(c, a, d, labels[t]) || !faces(c, d, b, labels[t])) continue;
         for (int j = 0; j < 3; ++j) {
           face_of.erase({F(t, j), F(t, (j + 1) % 3)});
           face_of.erase({F(u, j), F(u, (j + 1) % 3)});

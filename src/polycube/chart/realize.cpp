@@ -575,6 +575,16 @@ Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4
   return d;
 }
 
+bool faces_label(const MatX3d& X, int a, int b, int c, int label, double diag) {
+  return deform::area_normal(X, a, b, c).dot(label_direction(label)) > 1e-14 * diag * diag;
+}
+
+int count_misoriented(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, double diag) {
+  int m = 0;
+  for (int f = 0; f < B.rows(); ++f) m += !faces_label(X, B(f, 0), B(f, 1), B(f, 2), labels[f], diag);
+  return m;
+}
+
 void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult& r) {
   r.planarity_error = 0;
   r.misoriented_faces = 0;
@@ -587,9 +597,8 @@ void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult&
       hi = std::max(hi, r.X(B(f, j), k));
     }
     r.planarity_error = std::max(r.planarity_error, (hi - lo) / diag);
-    const Vec3 N = deform::area_normal(r.X, B(f, 0), B(f, 1), B(f, 2));
-    if (!(N.dot(label_direction(labels[f])) > 1e-14 * diag * diag)) r.misoriented_faces++;
   }
+  r.misoriented_faces = count_misoriented(r.X, B, labels, diag);
 }
 
 RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,

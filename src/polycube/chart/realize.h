@@ -97,12 +97,19 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
 
 /// Open surfaces: the axis each border edge runs along in the polycube (the dominant axis of the
 /// deformed edge other than its chart's axis, then single-edge zigzags straightened), in the
-/// order of `edges` (filled: border edges (a, b) loop by loop, oriented as in their triangle).
+/// order of `edges` (filled: border edges (a, b, face) loop by loop, oriented as in their
+/// triangle, as border_loops gives them).
 std::vector<int> border_directions(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels,
-                                   std::vector<std::array<int, 2>>* edges);
+                                   std::vector<std::array<int, 3>>* edges);
 
 /// Isometric distortion max(s1, 1/s2) of the map between triangles (rest -> X).
 Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, const MatX3i& F);
+
+/// Whether triangle (a, b, c) of X faces `label`'s direction: N . d > 1e-14 diag^2 (N its area
+/// normal), so that a triangle of zero area fails too.
+bool faces_label(const MatX3d& X, int a, int b, int c, int label, double diag);
+/// Triangles of B that do not face their label (see faces_label).
+int count_misoriented(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, double diag);
 
 /// Sets r.planarity_error (max extent of a triangle of B along its label's axis / bbox diagonal of
 /// r.X) and r.misoriented_faces (triangles not facing their label's direction, or of zero area).

@@ -18,7 +18,7 @@ namespace polycube::chart {
 using SpMat = Eigen::SparseMatrix<double>;
 
 std::vector<int> border_directions(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels,
-                                   std::vector<std::array<int, 2>>* edges) {
+                                   std::vector<std::array<int, 3>>* edges) {
   std::vector<int> dir;
   if (edges) edges->clear();
   for (const auto& loop : border_loops(F)) {
@@ -46,7 +46,7 @@ std::vector<int> border_directions(const MatX3d& X, const MatX3i& F, const std::
     }
     for (int i = 0; i < n; ++i) {
       dir.push_back(d[i]);
-      if (edges) edges->push_back({loop[i][0], loop[i][1]});
+      if (edges) edges->push_back(loop[i]);
     }
   }
   return dir;
@@ -101,25 +101,17 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     uf[k].unite(F(f, 0), F(f, 1));
     uf[k].unite(F(f, 0), F(f, 2));
   }
-  std::vector<std::array<int, 2>> bedges;
+  std::vector<std::array<int, 3>> bedges;  // (a, b, face)
   const std::vector<int> bdir = border_directions(deformed, F, labels, &bedges);
-  {
-    // The face of each border edge, for its chart axis.
-    std::map<std::pair<int, int>, int> face_of;
-    for (int f = 0; f < F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) face_of[{F(f, k), F(f, (k + 1) % 3)}] = f;
-    for (size_t i = 0; i < bedges.size(); ++i) {
-      const int k = labels[face_of[{bedges[i][0], bedges[i][1]}]] / 2;
-      const int m = 3 - k - bdir[i];
-      constrained[m][bedges[i][0]] = constrained[m][bedges[i][1]] = 1;
-      uf[m].unite(bedges[i][0], bedges[i][1]);
-    }
+  for (size_t i = 0; i < bedges.size(); ++i) {
+    const int m = 3 - labels[bedges[i][2]] / 2 - bdir[i];
+    constrained[m][bedges[i][0]] = constrained[m][bedges[i][1]] = 1;
+    uf[m].unite(bedges[i][0], bedges[i][1]);
   }
   // Per axis: unknown index of every vertex (its plane's, or its own), plane heights = mean of
   // the deformed coordinates of the plane's vertices.
   std::array<std::vector<int>, 3> var;
   std::array<int, 3> nvar{};
-  Eigen::MatrixXd dummy;
   std::array<Eigen::VectorXd, 3> y;
   for (int k = 0; k < 3; ++k) {
     var[k].assign(n, -1);
@@ -183,26 +175,18 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     }
   }
   const double diag0 = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
-  auto misoriented = [&](const MatX3d& X) {
-    int m = 0;
-    for (int f = 0; f < F.rows(); ++f) {
-      const Vec3 N = deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2));
-      m += !(N.dot(label_direction(labels[f])) > 1e-14 * diag0 * diag0);
-    }
-    return m;
-  };
+  auto misoriented = [&](const MatX3d& X) { return count_misoriented(X, F, labels, diag0); };
   // Local/global iterations from y. guard: an iterate with more misoriented triangles than the
   // best so far ends the run (the best is kept).
   auto arap = [&](std::array<Eigen::VectorXd, 3>& yy, bool guard, int& iterations) {
     y = yy;
     MatX3d X = positions();
-    double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(3 * n);
+    double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, &g, nullptr);
     const double e_start = e_prev;
     int bad = guard ? misoriented(X) : 0;
     iterations = 0;
     for (int it = 0; it < opt.max_iterations; ++it) {
-      Eigen::VectorXd g = Eigen::VectorXd::Zero(3 * n);
-      deform::surface_arap_energy(X, F, ar, 1.0, &g, nullptr);
       const std::array<Eigen::VectorXd, 3> y_old = y;
       for (int k = 0; k < 3; ++k) {
         // g = L x - b (rotations fixed), so b = L x - g.
@@ -221,7 +205,8 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
         bad = m;
       }
       X = std::move(Xn);
-      const double e = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
+      g.setZero();
+      const double e = deform::surface_arap_energy(X, F, ar, 1.0, &g, nullptr);
       iterations = it + 1;
       hooks.report("polycube", 0.9 * (it + 1) / opt.max_iterations);
       const bool done = e_prev - e < opt.tolerance * std::max(1e-300, e_start);
@@ -310,7 +295,6 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     };
     double eps = 1.0;
     int best = misoriented(X), since_best = 0, total = 0;
-    energy(z, eps, nullptr);
     for (int round = 0; round < 30 && best > 0 && since_best < 8; ++round) {
       const double E0 = energy(z, eps, nullptr);
       double E = E0;
@@ -344,18 +328,16 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
   const std::array<Eigen::VectorXd, 3> y_start = y;
   int its = 0;
   auto finish = [&](MatX3d& X, const char* name) {
-    std::array<Eigen::VectorXd, 3> yy;
-    for (int k = 0; k < 3; ++k) {
-      yy[k].resize(nvar[k]);
-      for (int v = 0; v < n; ++v) yy[k][var[k][v]] = X(v, k);
-    }
     untangle(X);
     const int m = misoriented(X);
     hooks.debug(std::string("surface realization, start ") + name + ": " + std::to_string(m) +
                 " misoriented triangles after untangling");
     if (m > 0) return m;
-    for (int k = 0; k < 3; ++k)
+    std::array<Eigen::VectorXd, 3> yy;
+    for (int k = 0; k < 3; ++k) {
+      yy[k].resize(nvar[k]);
       for (int v = 0; v < n; ++v) yy[k][var[k][v]] = X(v, k);
+    }
     X = arap(yy, true, its);
     r.iterations = its;
     r.start = name;
@@ -363,7 +345,6 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
   };
   y = y_start;
   MatX3d X = positions();
-  MatX3d X_start = X;
   int bad = finish(X, "surface_deformed");
   if (bad > 0) {
     std::array<Eigen::VectorXd, 3> y1 = y_start;

@@ -108,6 +108,17 @@ bool any_inverted(const MatX3d& X, const MatX4i& T) {
   return false;
 }
 
+// sum|e|_1 / sum|e|_2 - 1 over the border edges (0 without any).
+double border_l1_quality(const MatX3d& X, const std::vector<std::array<int, 2>>& border) {
+  double b1 = 0, b2 = 0;
+  for (const auto& e : border) {
+    const Vec3 d = (X.row(e[1]) - X.row(e[0])).transpose();
+    b1 += d.lpNorm<1>();
+    b2 += d.norm();
+  }
+  return b2 > 0 ? b1 / b2 - 1.0 : 0.0;
+}
+
 // Scales X about its boundary centroid so that the boundary area is area0 (the constraint C = 0).
 void restore_area(MatX3d& X, const MatX3i& B, double area0) {
   double l1, a;
@@ -179,16 +190,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   }
   // The schedule's measure: sum|N|_1 / sum|N|_2 - 1 over the normals and, on open surfaces, the
   // larger of that and the same over the border edges.
-  auto quality = [&](const MatX3d& Y) {
-    double a, s;
-    l1_measure(Y, B, s, a);
-    double b1 = 0, b2 = 0;
-    for (const auto& e : p.border) {
-      const Vec3 d = (Y.row(e[1]) - Y.row(e[0])).transpose();
-      b1 += d.lpNorm<1>();
-      b2 += d.norm();
-    }
-    return std::max(s / a - 1.0, b2 > 0 ? b1 / b2 - 1.0 : 0.0);
+  // (s, a: sum|N|_1 and the area of Y, from l1_measure.)
+  auto quality = [&](const MatX3d& Y, double s, double a) {
+    return std::max(s / a - 1.0, border_l1_quality(Y, p.border));
   };
   for (const EdgeConstraint& e : opt.edges)
     POLYCUBE_ASSERT(e.pair >= 0 && e.pair < static_cast<int>(p.pairs.size()), "edge constraint out of range");
@@ -214,7 +218,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
-  double q = quality(X);
+  double q = quality(X, l1, p.area0);
   for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
     const double d0 = q;
@@ -325,7 +329,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       X = Xt;
       double s1, a1;
       l1_measure(X, B, s1, a1);
-      q = quality(X);
+      q = quality(X, s1, a1);
       IterationRecord r;
       r.alpha_step = step;
       r.iteration = total_iterations;
@@ -375,15 +379,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.l1_quality = s1 / a1 - 1.0;
   res.error_d = (s1 - p.area0) * scale * scale;
   res.arap = p.distortion(X, nullptr, nullptr);
-  if (!p.border.empty()) {
-    double bl1 = 0, bl2 = 0;
-    for (const auto& e : p.border) {
-      const Vec3 d = (X.row(e[1]) - X.row(e[0])).transpose();
-      bl1 += d.lpNorm<1>();
-      bl2 += d.norm();
-    }
-    res.border_quality = bl1 / bl2 - 1.0;
-  }
+  res.border_quality = border_l1_quality(X, p.border);
   res.iterations = total_iterations;
   res.inverted = measure_tets(res.X, T).inverted;
   res.converged = q < opt.target_quality;

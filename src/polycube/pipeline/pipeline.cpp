@@ -587,6 +587,12 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
       hooks.report("polycube", 1);
 
+      // Surface area of the polycube (a quad count sets the grid so that it holds that many unit squares).
+      auto polycube_area = [&] {
+        double a = 0, l1;
+        deform::l1_measure(rr.X, B, l1, a);
+        return a;
+      };
       // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
       auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, const json& grid,
                              const json& extra) {
@@ -699,11 +705,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         Stopwatch sq;
         hooks.report("quad", 0);
         hooks.info("extracting the quad mesh from the surface polycube");
-        double area = 0;
-        for (int f = 0; f < B.rows(); ++f)
-          area += 0.5 * (rr.X.row(B(f, 1)) - rr.X.row(B(f, 0))).cross(rr.X.row(B(f, 2)) - rr.X.row(B(f, 0))).norm();
         const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
-        const double cpu = std::sqrt(target / area);
+        const double cpu = std::sqrt(target / polycube_area());
         const quad::QuadResult qr =
             quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
         write_quads(qr, ex.charts.corners, sq,
@@ -719,12 +722,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         ho.pillow = "off";
         ho.smooth_iterations = 0;
         bool report_grid_optimized = false;
-        if (opt.target_quads > 0) {
-          double area = 0;
-          for (int f = 0; f < B.rows(); ++f)
-            area += 0.5 * (rr.X.row(B(f, 1)) - rr.X.row(B(f, 0))).cross(rr.X.row(B(f, 2)) - rr.X.row(B(f, 0))).norm();
-          ho.cells_per_unit = std::sqrt(opt.target_quads / area);
-        }
+        if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
         quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
         if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
@@ -741,7 +739,6 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                     {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
                      {"optimized", report_grid_optimized}},
                     json::object());
-        hooks.report("quad", 1);
       }
     }
 
