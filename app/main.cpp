@@ -196,6 +196,13 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size
+  // to the hexes.
+  if (!run_hex && !run_quad && app.count("--until") == 0) {
+    const bool quads = app.count("--quads") > 0, hexes = app.count("--hexes") + app.count("--hex-size") > 0;
+    if (quads && !hexes) run_quad = true;
+    if (hexes && !quads) run_hex = true;
+  }
   if (run_hex && run_quad) {
     std::fprintf(stderr, "[error] give --hex or --quad, not both\n");
     return 2;

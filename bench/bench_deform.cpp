@@ -87,11 +87,11 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only) 
                     p[1].c_str(), p[2].c_str(), p[3].c_str());
         continue;
       }
-      const MatX3i& F = e.flipped_B.rows() > 0 ? e.flipped_B : s.F;
+      const MatX3i& F = e.map_triangles(s.F);
       double area = 0;
       for (int f = 0; f < F.rows(); ++f) area += deform::area_normal(e.realized.X, F(f, 0), F(f, 1), F(f, 2)).norm();
       const quad::QuadResult q =
-          quad::quad_mesh_from_surface_polycube(s.V, F, e.realized.X, e.labels, std::sqrt(target / area), s);
+          quad::quad_mesh_from_surface_polycube(s.V, F, e.realized.X, e.map_triangle_labels(), std::sqrt(target / area), s);
       const hex::Hausdorff hd = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), s.V, s.F);
       Eigen::AlignedBox3d box;
       for (int v = 0; v < s.V.rows(); ++v) box.extend(s.V.row(v).transpose());

@@ -134,6 +134,52 @@ TEST(SurfacePolycube, EdgeFlipUnfoldsATriangle) {
   EXPECT_EQ(chart::flip_folded_edges(X, G, {kPosZ, kNegY}), 0);
 }
 
+TEST(SurfacePolycube, EdgeCollapseRemovesAChartEdgeSegmentRunningTheWrongWay) {
+  // A 4 x 4 grid box whose -X/+Y edge line (x = 0, y = 1) has two consecutive vertices swapped
+  // along z in X: the segment between them runs the wrong way, folding its -X and +Y triangles
+  // (the situation of basic/eight.off). Collapsing it removes both and leaves a closed manifold
+  // with the same labels elsewhere, which realizes as an exact box.
+  const auto s = grid_box(4);
+  const std::vector<int> labels0 = chart::label_by_normal(s.V, s.F);
+  int p = -1, q = -1;
+  for (int v = 0; v < s.V.rows(); ++v) {
+    if (std::abs(s.V(v, 0)) > 1e-12 || std::abs(s.V(v, 1) - 1) > 1e-12) continue;
+    if (std::abs(s.V(v, 2) - 0.25) < 1e-12) p = v;
+    if (std::abs(s.V(v, 2) - 0.5) < 1e-12) q = v;
+  }
+  ASSERT_GE(p, 0);
+  ASSERT_GE(q, 0);
+  MatX3d X = s.V;
+  std::swap(X(p, 2), X(q, 2));
+  const double diag = std::sqrt(3.0);
+  ASSERT_GT(chart::count_misoriented(X, s.F, labels0, diag), 0);
+  MatX3i F = s.F;
+  std::vector<int> labels = labels0;
+  std::vector<int> merged;
+  const int c = chart::collapse_folded_edges(s.V, X, F, labels, merged);
+  ASSERT_GE(c, 1);
+  EXPECT_TRUE(merged[p] == q || merged[q] == p);
+  EXPECT_EQ(F.rows(), s.F.rows() - 2 * c);
+  ASSERT_EQ(static_cast<Eigen::Index>(labels.size()), F.rows());
+  std::map<std::pair<int, int>, int> use;
+  std::set<int> used;
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = F(f, k), b = F(f, (k + 1) % 3);
+      EXPECT_LT(merged[a], 0) << "triangle " << f << " uses a merged vertex";
+      ASSERT_NE(a, b);
+      use[{std::min(a, b), std::max(a, b)}]++;
+      used.insert(a);
+    }
+  for (const auto& [e, n] : use) EXPECT_EQ(n, 2) << e.first << "-" << e.second;
+  EXPECT_EQ(static_cast<int>(used.size()) - static_cast<int>(use.size()) + F.rows(), 2);  // still a sphere
+  // The collapsed mesh realizes as an exact box: every triangle faces its label, planes exact.
+  const chart::RealizeResult r = chart::realize_surface_polycube(s.V, F, X, labels);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(chart::count_misoriented(r.X, F, labels, diag), 0);
+  EXPECT_LT(r.planarity_error, 1e-12);
+}
+
 TEST(SurfacePolycube, SphereGivesACube) {
   const auto s = sphere(4);
   const auto e = surface_polycube(s);

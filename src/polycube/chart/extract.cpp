@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <map>
+#include <set>
+#include <tuple>
 
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
@@ -27,6 +29,66 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
               std::to_string(e.charts.corners) + " corners");
   for (const auto& p : e.charts.problems) hooks.debug("chart graph: " + p);
   e.realized = realize_polycube(rest, T, B, deformed, e.labels, opt.realize, hooks);
+  // Surface mode: a few triangles still folded in their chart's plane. Edge flips inside a chart
+  // (same vertices, another triangulation); then collapses of the folded triangles' edges (two
+  // triangles fewer, one vertex merged into a neighbour) and a new realization, a few rounds.
+  auto repair_surface = [&] {
+    if (e.realized.success || e.realized.misoriented_faces == 0 ||
+        e.realized.misoriented_faces > opt.max_flip_faces || e.realized.degenerate_border_edges > 0 ||
+        e.realized.X.rows() == 0)
+      return;
+    MatX3i F = B;
+    std::vector<int> L = e.labels;
+    std::vector<int> merged(rest.rows(), -1);
+    RealizeResult r = e.realized;
+    int flips = 0, collapses = 0;
+    for (int round = 0;; ++round) {
+      const int f = flip_folded_edges(r.X, F, L);
+      flips += f;
+      check_faces(F, L, r);
+      hooks.debug(std::to_string(f) + " edge flips leave " + std::to_string(r.misoriented_faces) + " folded triangles");
+      if (r.misoriented_faces == 0 || round >= opt.collapse_rounds) break;
+      const int c = collapse_folded_edges(rest, r.X, F, L, merged);
+      if (c == 0) break;
+      collapses += c;
+      hooks.debug("collapsing " + std::to_string(c) + " edges of folded triangles; realizing again");
+      RealizeOptions ro = opt.realize;
+      r = realize_surface_polycube(rest, F, deformed, L, ro, hooks);
+      if (r.success || r.misoriented_faces > opt.max_flip_faces || r.degenerate_border_edges > 0) break;
+    }
+    if (!r.success && r.misoriented_faces == 0 && r.degenerate_border_edges == 0 && r.X.rows() > 0) {
+      // Flips unfolded the last triangles of an untangled layout: finish it with the realization's
+      // never-folding ARAP iterations (the untangling alone leaves large distortions).
+      RealizeResult fin = realize_surface_polycube(rest, F, deformed, L, opt.realize, hooks, &r.X);
+      if (fin.success) r = std::move(fin);
+    }
+    if (r.misoriented_faces == 0 && r.degenerate_border_edges == 0 && r.X.rows() > 0) {
+      // Merged vertices sit on the vertex they were merged into (followed through later merges).
+      for (int v = 0; v < static_cast<int>(merged.size()); ++v) {
+        int w = v;
+        while (merged[w] >= 0) w = merged[w];
+        if (w != v) r.X.row(v) = r.X.row(w);
+      }
+      if (!r.success) {
+        r.success = true;
+        r.failure.clear();
+        r.arap = deform::surface_arap_energy(r.X, F, deform::SurfaceArapRest::build(rest, F), 1.0, nullptr, nullptr);
+        r.isometric = isometric_distortion_surface(rest, r.X, F);
+      }
+      e.realized = std::move(r);
+      e.map_B = std::move(F);
+      e.map_labels = std::move(L);
+      e.edge_flips = flips;
+      e.edge_collapses = collapses;
+    } else if (collapses > 0) {
+      e.realized.failure += " (after " + std::to_string(flips) + " edge flips and " + std::to_string(collapses) +
+                            " edge collapses: " + std::to_string(r.misoriented_faces) + " still folded)";
+    }
+  };
+  // Surface mode: flips and collapses first (the relabelling below mostly comes back to the same
+  // folds there, at the cost of a realization per attempt).
+  if (T.rows() == 0) repair_surface();
+  bool retried = false;
   // A realization with every tet positive but some boundary triangles flipped or flattened in
   // their plane: those triangles sit where their chart cannot reach (typically a chart border
   // that folds back). They take the most frequent other label of their edge neighbours, the
@@ -98,26 +160,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     RealizeOptions ro = opt.realize;
     if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
     e.realized = realize_polycube(rest, T, B, deformed, e.labels, ro, hooks);
+    retried = true;
   }
-  if (T.rows() == 0 && !e.realized.success && e.realized.misoriented_faces > 0 &&
-      e.realized.misoriented_faces <= opt.max_flip_faces && e.realized.degenerate_border_edges == 0 &&
-      e.realized.X.rows() > 0) {
-    MatX3i F = B;
-    const int flips = flip_folded_edges(e.realized.X, F, e.labels);
-    RealizeResult r = e.realized;
-    check_faces(F, e.labels, r);
-    hooks.debug(std::to_string(flips) + " edge flips leave " + std::to_string(r.misoriented_faces) +
-                " folded triangles");
-    if (flips > 0 && r.misoriented_faces == 0) {
-      r.success = true;
-      r.failure.clear();
-      r.arap = deform::surface_arap_energy(r.X, F, deform::SurfaceArapRest::build(rest, F), 1.0, nullptr, nullptr);
-      r.isometric = isometric_distortion_surface(rest, r.X, F);
-      e.realized = std::move(r);
-      e.flipped_B = std::move(F);
-      e.edge_flips = flips;
-    }
-  }
+  if (T.rows() == 0 && retried) repair_surface();
   return e;
 }
 
@@ -162,6 +207,107 @@ int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels
     if (done == 0) break;
   }
   return flips;
+}
+
+int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::vector<int>& labels,
+                          std::vector<int>& merged_into) {
+  const int nv = static_cast<int>(rest.rows());
+  if (static_cast<int>(merged_into.size()) != nv) merged_into.assign(nv, -1);
+  const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
+  std::vector<char> folded(F.rows(), 0), on_border(nv, 0);
+  for (int f = 0; f < F.rows(); ++f) folded[f] = !faces_label(X, F(f, 0), F(f, 1), F(f, 2), labels[f], diag);
+  for (const auto& loop : border_loops(F))
+    for (const auto& e : loop) on_border[e[0]] = on_border[e[1]] = 1;
+  std::vector<std::vector<int>> vf(nv);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int j = 0; j < 3; ++j) vf[F(f, j)].push_back(f);
+  // Candidates: the edges of folded triangles, those between two folded triangles first (a chart
+  // border segment running the wrong way folds both its triangles), then the shortest at rest.
+  std::vector<std::tuple<double, int, int>> cand;
+  for (int f = 0; f < F.rows(); ++f) {
+    if (!folded[f]) continue;
+    for (int k = 0; k < 3; ++k) {
+      const int a = std::min(F(f, k), F(f, (k + 1) % 3)), b = std::max(F(f, k), F(f, (k + 1) % 3));
+      int folded_sides = 0;
+      for (int g : vf[a])
+        if (folded[g] && (F(g, 0) == b || F(g, 1) == b || F(g, 2) == b)) ++folded_sides;
+      cand.emplace_back((folded_sides >= 2 ? 0.0 : 1.0) * diag + (rest.row(a) - rest.row(b)).norm(), a, b);
+    }
+  }
+  std::sort(cand.begin(), cand.end());
+  cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+  std::vector<char> removed(F.rows(), 0), touched(nv, 0);
+  int collapses = 0;
+  auto live_faces = [&](int v) {
+    std::vector<int> out;
+    for (int g : vf[v])
+      if (!removed[g] && (F(g, 0) == v || F(g, 1) == v || F(g, 2) == v)) out.push_back(g);
+    return out;
+  };
+  auto ring = [&](int v) {
+    std::set<int> out;
+    for (int g : live_faces(v))
+      for (int j = 0; j < 3; ++j)
+        if (F(g, j) != v) out.insert(F(g, j));
+    return out;
+  };
+  for (const auto& [score, a, b] : cand) {
+    if (touched[a] || touched[b] || on_border[a] || on_border[b]) continue;
+    std::vector<int> shared;  // the edge's two triangles
+    for (int g : live_faces(a))
+      if (F(g, 0) == b || F(g, 1) == b || F(g, 2) == b) shared.push_back(g);
+    if (shared.size() != 2) continue;
+    // Link condition: a and b have exactly the two opposite vertices as common neighbours.
+    const std::set<int> ra = ring(a), rb = ring(b);
+    int common = 0;
+    for (int v : ra) common += rb.count(v) > 0;
+    if (common != 2) continue;
+    // The vertex that goes must not bring a label (a plane) the kept one lacks.
+    auto label_set = [&](int v) {
+      std::set<int> out;
+      for (int g : live_faces(v))
+        if (g != shared[0] && g != shared[1]) out.insert(labels[g]);
+      return out;
+    };
+    const std::set<int> la = label_set(a), lb = label_set(b);
+    int gone = -1, kept = -1;
+    if (std::includes(lb.begin(), lb.end(), la.begin(), la.end())) gone = a, kept = b;
+    else if (std::includes(la.begin(), la.end(), lb.begin(), lb.end())) gone = b, kept = a;
+    else continue;
+    // No triangle of the rest surface turns over.
+    bool ok = true;
+    const std::vector<int> moved = live_faces(gone);
+    for (int g : moved) {
+      if (g == shared[0] || g == shared[1]) continue;
+      const Vec3 p0 = rest.row(F(g, 0)), p1 = rest.row(F(g, 1)), p2 = rest.row(F(g, 2));
+      const Vec3 n0 = (p1 - p0).cross(p2 - p0);
+      Vec3 q[3] = {p0, p1, p2};
+      for (int j = 0; j < 3; ++j)
+        if (F(g, j) == gone) q[j] = rest.row(kept).transpose();
+      if ((q[1] - q[0]).cross(q[2] - q[0]).dot(n0) <= 0) ok = false;
+    }
+    if (!ok) continue;
+    for (int g : moved)
+      for (int j = 0; j < 3; ++j)
+        if (F(g, j) == gone) F(g, j) = kept, vf[kept].push_back(g);
+    removed[shared[0]] = removed[shared[1]] = 1;
+    merged_into[gone] = kept;
+    for (int v : ra) touched[v] = 1;
+    for (int v : rb) touched[v] = 1;
+    touched[a] = touched[b] = 1;
+    ++collapses;
+  }
+  if (collapses == 0) return 0;
+  MatX3i F2(F.rows() - 2 * collapses, 3);
+  std::vector<int> l2;
+  for (int f = 0; f < F.rows(); ++f)
+    if (!removed[f]) {
+      F2.row(static_cast<Eigen::Index>(l2.size())) = F.row(f);
+      l2.push_back(labels[f]);
+    }
+  F = std::move(F2);
+  labels = std::move(l2);
+  return collapses;
 }
 
 }  // namespace polycube::chart

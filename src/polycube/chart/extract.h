@@ -13,6 +13,9 @@ struct ExtractOptions {
   /// Surface mode: when the realization leaves at most this many triangles folded, edge flips
   /// inside their charts are tried (see PolycubeExtraction::flipped_B); 0 = off.
   int max_flip_faces = 20;
+  /// Surface mode: rounds of edge collapses (collapse_folded_edges, then a new realization) when
+  /// edge flips leave triangles folded; 0 = off.
+  int collapse_rounds = 3;
   /// Triangles whose deformed area is below this fraction of the median deformed/rest area ratio
   /// take their neighbours' label before cleanup (relabel_collapsed); 0 = off.
   double collapsed_ratio = 1e-3;
@@ -29,12 +32,18 @@ struct PolycubeExtraction {
   CleanupStats cleanup;
   ChartReport charts;        ///< the cleaned chart graph
   RealizeResult realized;    ///< realized.success tells whether an exact polycube was built
-  /// Surface mode: the triangles of the polycube map, B with `edge_flips` edges flipped (empty when
-  /// none was): a triangle left folded in its chart's plane is repaired by flipping an edge it
-  /// shares with a triangle of the same chart when both new triangles face the label. The vertices
-  /// (and their positions on both sides of the map) are unchanged; only the triangulation differs.
-  MatX3i flipped_B;
+  /// Surface mode: the triangles of the polycube map when folded triangles were repaired (empty
+  /// otherwise, the map's triangles are B): B with `edge_flips` edges flipped inside a chart (same
+  /// vertices, another triangulation) and `edge_collapses` edges of sliver triangles collapsed (their
+  /// two triangles removed, one vertex merged into the other: its polycube position is the other's).
+  /// map_labels: one label per row of map_B.
+  MatX3i map_B;
+  std::vector<int> map_labels;
   int edge_flips = 0;
+  int edge_collapses = 0;
+  /// The map's triangles and their labels: map_B / map_labels when repaired, else B / labels.
+  const MatX3i& map_triangles(const MatX3i& B) const { return map_B.rows() > 0 ? map_B : B; }
+  const std::vector<int>& map_triangle_labels() const { return map_B.rows() > 0 ? map_labels : labels; }
 };
 
 /// rest/T/B: tet mesh and outward boundary triangles; deformed: the deformation's result.
@@ -45,5 +54,15 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
 /// and a triangle of the same label when both new triangles face it; repeated while it helps.
 /// Returns the flips made.
 int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels);
+
+/// Collapses, for triangles of F not facing their label in X, one edge each where that is safe:
+/// an interior edge (neither end on a border) whose ends have exactly two common neighbours, whose
+/// vanishing end brings no label the kept end lacks, and whose collapse turns no triangle of
+/// `rest` over. Edges shared by two folded triangles go first, then the shortest at rest; one
+/// collapse per neighbourhood. F and labels lose the two triangles of each collapsed edge;
+/// merged_into[v] (sized to rest.rows(), -1 = kept) names the vertex v was merged into. Returns
+/// the collapses made.
+int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::vector<int>& labels,
+                          std::vector<int>& merged_into);
 
 }  // namespace polycube::chart

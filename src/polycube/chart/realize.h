@@ -90,10 +90,12 @@ RealizeResult realize_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i
 /// Started from the deformed surface with every plane at its mean height, then local/global
 /// iterations of the surface ARAP energy (deform::surface_arap_energy, one factorization per axis).
 /// Fails (success = false) when a triangle does not face its label's direction or a border edge
-/// has zero length. `isometric` is over the triangles; `T` is empty.
+/// has zero length. `isometric` is over the triangles; `T` is empty. start: positions that satisfy
+/// the plane constraints (e.g. a realization whose folded triangles were repaired by edge flips):
+/// used instead of the three starts, then untangled if needed and finished by the ARAP iterations.
 RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& deformed,
                                        const std::vector<int>& labels, const RealizeOptions& opt = {},
-                                       const Hooks& hooks = {});
+                                       const Hooks& hooks = {}, const MatX3d* start = nullptr);
 
 /// Open surfaces: the axis each border edge runs along in the polycube (the dominant axis of the
 /// deformed edge other than its chart's axis, then single-edge zigzags straightened), in the

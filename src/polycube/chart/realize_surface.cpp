@@ -82,7 +82,7 @@ Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, con
 
 RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& deformed,
                                        const std::vector<int>& labels, const RealizeOptions& opt,
-                                       const Hooks& hooks) {
+                                       const Hooks& hooks, const MatX3d* start) {
   Stopwatch sw;
   RealizeResult r;
   r.start = "surface";
@@ -197,7 +197,16 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       }
       MatX3d Xn = positions();
       if (guard) {
-        const int m = misoriented(Xn);
+        // A step that folds a triangle is shortened (halved up to 8 times; positions are linear
+        // in y); if every length folds, the iterations end.
+        int m = misoriented(Xn);
+        const std::array<Eigen::VectorXd, 3> y_full = y;
+        for (int h = 1; m > bad && h <= 8; ++h) {
+          const double t = std::ldexp(1.0, -h);
+          for (int k = 0; k < 3; ++k) y[k] = y_old[k] + t * (y_full[k] - y_old[k]);
+          Xn = positions();
+          m = misoriented(Xn);
+        }
         if (m > bad) {
           y = y_old;
           break;
@@ -295,6 +304,7 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     };
     double eps = 1.0;
     int best = misoriented(X), since_best = 0, total = 0;
+    Eigen::VectorXd z_best = z;  // the round with the fewest misoriented triangles
     for (int round = 0; round < 30 && best > 0 && since_best < 8; ++round) {
       const double E0 = energy(z, eps, nullptr);
       double E = E0;
@@ -306,16 +316,15 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       const int m = misoriented(to_X(z));
       hooks.debug("surface untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
                   ", min det " + std::to_string(min_det) + ", " + std::to_string(m) + " misoriented");
-      if (m < best) best = m, since_best = 0;
+      if (m < best) best = m, since_best = 0, z_best = z;
       else ++since_best;
       const double sigma = std::max(1 - E / E0, 0.1);
       const double mu = (1 - sigma) * chi(min_det, eps);
       eps = min_det < mu ? 2 * std::sqrt(mu * (mu - min_det)) : 1e-13;
       if (m == 0) break;
     }
-    MatX3d Xu = to_X(z);
     r.untangle_iterations += total;
-    if (misoriented(Xu) < misoriented(X)) X = std::move(Xu);
+    if (best < misoriented(X)) X = to_X(z_best);
   };
   // Starts, in order, until one ends with every triangle facing its label:
   //  1. the deformed surface with every plane at its height (each triangle of the deformed
@@ -343,17 +352,32 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     r.start = name;
     return 0;
   };
-  y = y_start;
-  MatX3d X = positions();
-  int bad = finish(X, "surface_deformed");
-  if (bad > 0) {
+  MatX3d X;
+  int bad = 0;
+  if (start) {
+    // A given start (an exact polycube layout of these triangles, e.g. after edge flips): only
+    // the never-folding ARAP iterations (untangled first if it folds).
+    X = *start;
+    bad = finish(X, "given");
+  } else {
+    y = y_start;
+    X = positions();
+    bad = finish(X, "surface_deformed");
+  }
+  if (bad > 0 && !start) {
     std::array<Eigen::VectorXd, 3> y1 = y_start;
     MatX3d X1 = arap(y1, false, its);
     const int bad1 = finish(X1, "surface_arap");
     if (bad1 < bad) X = std::move(X1), bad = bad1;
   }
-  if (bad > 0) {
+  if (bad > 0 && !start) {
     std::vector<Eigen::Triplet<double>> ut;
+    // Vertices no triangle uses (merged away by collapse_folded_edges) stay where they are.
+    std::vector<char> used(n, 0);
+    for (int f = 0; f < F.rows(); ++f)
+      for (int j = 0; j < 3; ++j) used[F(f, j)] = 1;
+    for (int v = 0; v < n; ++v)
+      if (!used[v]) ut.emplace_back(v, v, 1.0);
     for (const auto& [a, b] : unique_edges(F)) {
       ut.emplace_back(a, a, 1.0);
       ut.emplace_back(b, b, 1.0);
@@ -367,6 +391,8 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       // Plane unknowns [0, planes) held at their heights by a stiff penalty; the rest harmonic.
       SpMat A = S[k].transpose() * U * S[k];
       Eigen::VectorXd rhs = Eigen::VectorXd::Zero(nvar[k]);
+      for (int v = 0; v < n; ++v)
+        if (!used[v]) rhs[var[k][v]] = y_start[k][var[k][v]];
       const double stiff = 1e8;
       for (int i = 0; i < r.planes[k]; ++i) {
         A.coeffRef(i, i) += stiff;

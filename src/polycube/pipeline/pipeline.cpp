@@ -493,12 +493,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
-      if (opt.surface) pj["edge_flips"] = ex.edge_flips;
+      if (opt.surface) {
+        pj["edge_flips"] = ex.edge_flips;
+        pj["edge_collapses"] = ex.edge_collapses;
+      }
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
       if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
         // the same orientation in a row (the polycube overlaps itself there).
-        const std::array<int, 3> o = hex::overlap_lines(rr.X, tm.boundary, ex.labels);
+        const std::array<int, 3> o = hex::overlap_lines(rr.X, ex.map_triangles(tm.boundary), ex.map_triangle_labels());
         pj["self_overlap_lines"] = {o[0], o[1], o[2]};
         if (o[0] + o[1] + o[2] > 0)
           hooks.warn("the polycube overlaps itself (" + std::to_string(o[0] + o[1] + o[2]) +
@@ -510,8 +513,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
 
       // Labels of the input triangles and polycube positions of the input vertices.
       const MatX3i& B = tm.boundary;
-      // The polycube's triangles: B, or in surface mode B with folded triangles' edges flipped.
-      const MatX3i& PB = ex.flipped_B.rows() > 0 ? ex.flipped_B : B;
+      // The polycube's triangles: B, or in surface mode B with folded triangles' edges flipped or
+      // collapsed (PL: their labels).
+      const MatX3i& PB = ex.map_triangles(B);
+      const std::vector<int>& PL = ex.map_triangle_labels();
       bool direct = static_cast<int>(surf_to_tet.size()) == surface.V.rows() && B.rows() == surface.F.rows();
       for (int f = 0; direct && f < B.rows(); ++f) {
         std::array<int, 3> a{surf_to_tet[surface.F(f, 0)], surf_to_tet[surface.F(f, 1)], surf_to_tet[surface.F(f, 2)]};
@@ -554,8 +559,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pm.F = PB;
       pm.T = rr.T;
       io::CellFields pf;
-      pf["label"] = ex.labels;
-      pf["label"].resize(B.rows() + rr.T.rows(), -1);
+      pf["label"] = PL;
+      pf["label"].resize(PB.rows() + rr.T.rows(), -1);
       io::write_medit(stage_path("polycube.mesh"), pm);
       io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
       io::CellFields df;
@@ -708,7 +713,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
         const double cpu = std::sqrt(target / polycube_area());
         const quad::QuadResult qr =
-            quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, ex.labels, cpu, surface, opt.quad, hooks);
+            quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, PL, cpu, surface, opt.quad, hooks);
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}},
