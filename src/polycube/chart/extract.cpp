@@ -42,18 +42,44 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     std::vector<int> merged(rest.rows(), -1);
     RealizeResult r = e.realized;
     int flips = 0, collapses = 0;
+    // Merged vertices sit on the vertex they were merged into (followed through later merges).
+    auto place_merged = [&](MatX3d& X) {
+      for (int v = 0; v < static_cast<int>(merged.size()); ++v) {
+        int w = v;
+        while (merged[w] >= 0) w = merged[w];
+        if (w != v) X.row(v) = X.row(w);
+      }
+    };
     for (int round = 0;; ++round) {
       const int f = flip_folded_edges(r.X, F, L);
       flips += f;
       check_faces(F, L, r);
       hooks.debug(std::to_string(f) + " edge flips leave " + std::to_string(r.misoriented_faces) + " folded triangles");
       if (r.misoriented_faces == 0 || round >= opt.collapse_rounds) break;
+      {
+        const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+        for (int t = 0; t < F.rows(); ++t)
+          if (!faces_label(r.X, F(t, 0), F(t, 1), F(t, 2), L[t], diag))
+            hooks.debug("folded triangle (" + std::to_string(F(t, 0)) + " " + std::to_string(F(t, 1)) + " " +
+                        std::to_string(F(t, 2)) + ") label " + label_name(L[t]));
+      }
       const int c = collapse_folded_edges(rest, r.X, F, L, merged);
       if (c == 0) break;
       collapses += c;
       hooks.debug("collapsing " + std::to_string(c) + " edges of folded triangles; realizing again");
-      RealizeOptions ro = opt.realize;
-      r = realize_surface_polycube(rest, F, deformed, L, ro, hooks);
+      // From the layout at hand with the merged vertices on their partners (it keeps the planes:
+      // a merged vertex brings no label its partner lacks), untangled locally; if that leaves
+      // folds, the realization's own starts.
+      MatX3d start = r.X;
+      place_merged(start);
+      RealizeResult local = realize_surface_polycube(rest, F, deformed, L, opt.realize, hooks, &start);
+      hooks.debug("realization from the collapsed layout: " + std::to_string(local.misoriented_faces) + " folded");
+      if (local.success) {
+        r = std::move(local);
+        break;
+      }
+      r = realize_surface_polycube(rest, F, deformed, L, opt.realize, hooks);
+      if (local.misoriented_faces < r.misoriented_faces) r = std::move(local);
       if (r.success || r.misoriented_faces > opt.max_flip_faces || r.degenerate_border_edges > 0) break;
     }
     if (!r.success && r.misoriented_faces == 0 && r.degenerate_border_edges == 0 && r.X.rows() > 0) {
@@ -63,12 +89,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       if (fin.success) r = std::move(fin);
     }
     if (r.misoriented_faces == 0 && r.degenerate_border_edges == 0 && r.X.rows() > 0) {
-      // Merged vertices sit on the vertex they were merged into (followed through later merges).
-      for (int v = 0; v < static_cast<int>(merged.size()); ++v) {
-        int w = v;
-        while (merged[w] >= 0) w = merged[w];
-        if (w != v) r.X.row(v) = r.X.row(w);
-      }
+      place_merged(r.X);
       if (!r.success) {
         r.success = true;
         r.failure.clear();
@@ -262,17 +283,23 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
     int common = 0;
     for (int v : ra) common += rb.count(v) > 0;
     if (common != 2) continue;
-    // The vertex that goes must not bring a label (a plane) the kept one lacks.
-    auto label_set = [&](int v) {
+    // The kept vertex must not gain a plane: the labels of both ends' remaining triangles must be
+    // among the kept one's labels before the collapse (so a corner of three charts whose triangle
+    // at the corner folded can absorb its neighbours on the chart edges).
+    auto label_set = [&](int v, bool with_shared) {
       std::set<int> out;
       for (int g : live_faces(v))
-        if (g != shared[0] && g != shared[1]) out.insert(labels[g]);
+        if (with_shared || (g != shared[0] && g != shared[1])) out.insert(labels[g]);
       return out;
     };
-    const std::set<int> la = label_set(a), lb = label_set(b);
+    std::set<int> after = label_set(a, false);
+    for (int l : label_set(b, false)) after.insert(l);
+    const std::set<int> la = label_set(a, true), lb = label_set(b, true);
+    const bool keep_a = std::includes(la.begin(), la.end(), after.begin(), after.end());
+    const bool keep_b = std::includes(lb.begin(), lb.end(), after.begin(), after.end());
     int gone = -1, kept = -1;
-    if (std::includes(lb.begin(), lb.end(), la.begin(), la.end())) gone = a, kept = b;
-    else if (std::includes(la.begin(), la.end(), lb.begin(), lb.end())) gone = b, kept = a;
+    if (keep_b && (!keep_a || lb.size() >= la.size())) gone = a, kept = b;
+    else if (keep_a) gone = b, kept = a;
     else continue;
     // No triangle of the rest surface turns over.
     bool ok = true;

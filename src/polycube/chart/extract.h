@@ -57,8 +57,8 @@ int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels
 
 /// Collapses, for triangles of F not facing their label in X, one edge each where that is safe:
 /// an interior edge (neither end on a border) whose ends have exactly two common neighbours, whose
-/// vanishing end brings no label the kept end lacks, and whose collapse turns no triangle of
-/// `rest` over. Edges shared by two folded triangles go first, then the shortest at rest; one
+/// kept end gains no label (the labels of both ends' remaining triangles are among the kept end's
+/// labels before), and whose collapse turns no triangle of `rest` over. Edges shared by two folded triangles go first, then the shortest at rest; one
 /// collapse per neighbourhood. F and labels lose the two triangles of each collapsed edge;
 /// merged_into[v] (sized to rest.rows(), -1 = kept) names the vertex v was merged into. Returns
 /// the collapses made.

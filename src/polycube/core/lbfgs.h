@@ -21,29 +21,31 @@ struct LbfgsOptions {
 inline int lbfgs_minimize(Eigen::VectorXd& z, const std::function<double(const Eigen::VectorXd&, Eigen::VectorXd*)>& f,
                           const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& precondition,
                           const LbfgsOptions& opt, double& E, const std::function<bool(int)>& stop = {}) {
-  std::vector<Eigen::VectorXd> S, Yv;
+  // P^-1 is linear, so with P^-1 g kept per iterate and P^-1 y_i = P^-1 g_(i+1) - P^-1 g_i per
+  // pair, the two-loop recursion needs one application of P^-1 per step (P^-1 q = P^-1 g -
+  // sum a_i P^-1 y_i), not two.
+  std::vector<Eigen::VectorXd> S, Yv, KYv;
   std::vector<double> rho;
   Eigen::VectorXd g, gt;
   E = f(z, &g);
+  Eigen::VectorXd Kg = precondition(g);
   int it = 0;
   while (it < opt.max_iterations) {
-    Eigen::VectorXd q = g;
+    Eigen::VectorXd q = g, Kq = Kg;
     std::vector<double> a(S.size());
     for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
       a[i] = rho[i] * S[i].dot(q);
       q -= a[i] * Yv[i];
+      Kq -= a[i] * KYv[i];
     }
-    Eigen::VectorXd r = precondition(q);
-    if (!S.empty()) {
-      const Eigen::VectorXd Ky = precondition(Yv.back());
-      r *= S.back().dot(Yv.back()) / std::max(Yv.back().dot(Ky), 1e-300);
-    }
+    Eigen::VectorXd r = std::move(Kq);
+    if (!S.empty()) r *= S.back().dot(Yv.back()) / std::max(Yv.back().dot(KYv.back()), 1e-300);
     for (size_t i = 0; i < S.size(); ++i) r += (a[i] - rho[i] * Yv[i].dot(r)) * S[i];
     Eigen::VectorXd d = -r;
     double slope = d.dot(g);
     if (!(slope < 0)) {
-      S.clear(), Yv.clear(), rho.clear();
-      d = -precondition(g);
+      S.clear(), Yv.clear(), KYv.clear(), rho.clear();
+      d = -Kg;
       slope = d.dot(g);
       if (!(slope < 0)) break;
     }
@@ -58,18 +60,22 @@ inline int lbfgs_minimize(Eigen::VectorXd& z, const std::function<double(const E
     }
     if (!ok) break;
     const Eigen::VectorXd sv = step * d, yv = gt - g;
+    Eigen::VectorXd Kgt = precondition(gt);
     z += sv;
     const double decrease = E - Et;
     E = Et;
-    g = gt;
     ++it;
     const double sy = sv.dot(yv);
     if (sy > 1e-300) {
-      if (static_cast<int>(S.size()) == opt.memory) S.erase(S.begin()), Yv.erase(Yv.begin()), rho.erase(rho.begin());
+      if (static_cast<int>(S.size()) == opt.memory)
+        S.erase(S.begin()), Yv.erase(Yv.begin()), KYv.erase(KYv.begin()), rho.erase(rho.begin());
       S.push_back(sv);
       Yv.push_back(yv);
+      KYv.push_back(Kgt - Kg);
       rho.push_back(1 / sy);
     }
+    g = gt;
+    Kg = std::move(Kgt);
     if (decrease < opt.decrease_tol * std::abs(E)) break;
     if (stop && stop(it - 1)) break;
   }
