@@ -26,6 +26,15 @@ struct AxisMap {
     if (x == h[i]) return n[i];
     return n[i] + (x - h[i]) / (h[i + 1] - h[i]) * (n[i + 1] - n[i]);
   }
+  /// The inverse (n is strictly increasing: distinct heights never share an integer).
+  double inverse(double y) const {
+    if (h.empty()) return y / s;
+    if (y <= n.front()) return h.front() + (y - n.front()) / s;
+    if (y >= n.back()) return h.back() + (y - n.back()) / s;
+    const size_t i = static_cast<size_t>(std::upper_bound(n.begin(), n.end(), y) - n.begin()) - 1;
+    if (y == n[i]) return h[i];
+    return h[i] + (y - n[i]) / (n[i + 1] - n[i]) * (h[i + 1] - h[i]);
+  }
 };
 
 }  // namespace
@@ -67,6 +76,10 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     r.cells[k] = static_cast<int>(std::lround(Y.col(k).maxCoeff() - Y.col(k).minCoeff()));
 
   // ---- grid points and unit squares of every chart ----
+  // Located in the polycube itself (X), through the inverse of the per-axis maps: the maps are
+  // monotone per axis but not affine, so the image of a sliver triangle (Y) can come out folded
+  // (spot.obj: one polycube triangle of max isometric distortion 1e4 did, and a grid point was
+  // then in no triangle), while X is fold-free.
   std::map<std::array<int, 3>, int> vid;
   std::vector<Vec3> pos;
   std::set<std::array<int, 4>> cells;  // (label, plane integer, i, j)
@@ -74,9 +87,11 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
     const int c = static_cast<int>(std::lround(Y(F(f, 0), k)));
     Eigen::Vector2d p[3];
-    for (int j = 0; j < 3; ++j) p[j] = Eigen::Vector2d(Y(F(f, j), a), Y(F(f, j), b));
+    for (int j = 0; j < 3; ++j) p[j] = Eigen::Vector2d(X(F(f, j), a), X(F(f, j), b));
     const double A = (p[1] - p[0]).x() * (p[2] - p[0]).y() - (p[1] - p[0]).y() * (p[2] - p[0]).x();
     if (!(std::abs(A) > 0)) continue;  // no area in the chart: holds no grid point of its own
+    double edge_len[3];  // length of the edge opposite each vertex
+    for (int t = 0; t < 3; ++t) edge_len[t] = (p[(t + 2) % 3] - p[(t + 1) % 3]).norm();
     auto bary = [&](const Eigen::Vector2d& q) {
       Eigen::Vector3d l;
       for (int j = 0; j < 3; ++j) {
@@ -85,13 +100,24 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       }
       return l;
     };
+    // Inside up to tol from each edge (a distance, not a barycentric tolerance, which slivers
+    // would blow up).
+    auto inside = [&](const Eigen::Vector3d& l) {
+      for (int t = 0; t < 3; ++t)
+        if (l[t] * std::abs(A) / std::max(edge_len[t], 1e-300) < -tol) return false;
+      return true;
+    };
+    auto at = [&](double i, double j) { return Eigen::Vector2d(map[a].inverse(i), map[b].inverse(j)); };
     const double eps = 1e-9;
-    const double lo_a = std::min({p[0].x(), p[1].x(), p[2].x()}), hi_a = std::max({p[0].x(), p[1].x(), p[2].x()});
-    const double lo_b = std::min({p[0].y(), p[1].y(), p[2].y()}), hi_b = std::max({p[0].y(), p[1].y(), p[2].y()});
+    double lo_a = Y(F(f, 0), a), hi_a = lo_a, lo_b = Y(F(f, 0), b), hi_b = lo_b;
+    for (int j = 1; j < 3; ++j) {
+      lo_a = std::min(lo_a, Y(F(f, j), a)), hi_a = std::max(hi_a, Y(F(f, j), a));
+      lo_b = std::min(lo_b, Y(F(f, j), b)), hi_b = std::max(hi_b, Y(F(f, j), b));
+    }
     for (int i = static_cast<int>(std::ceil(lo_a - eps)); i <= static_cast<int>(std::floor(hi_a + eps)); ++i)
       for (int j = static_cast<int>(std::ceil(lo_b - eps)); j <= static_cast<int>(std::floor(hi_b + eps)); ++j) {
-        Eigen::Vector3d l = bary(Eigen::Vector2d(i, j));
-        if (l.minCoeff() < -eps) continue;
+        Eigen::Vector3d l = bary(at(i, j));
+        if (!inside(l)) continue;
         std::array<int, 3> key;
         key[k] = c;
         key[a] = i;
@@ -106,7 +132,7 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       }
     for (int i = static_cast<int>(std::floor(lo_a)); i < static_cast<int>(std::ceil(hi_a)); ++i)
       for (int j = static_cast<int>(std::floor(lo_b)); j < static_cast<int>(std::ceil(hi_b)); ++j)
-        if (bary(Eigen::Vector2d(i + 0.5, j + 0.5)).minCoeff() >= -eps) cells.insert({labels[f], c, i, j});
+        if (inside(bary(at(i + 0.5, j + 0.5)))) cells.insert({labels[f], c, i, j});
   }
   r.V.resize(static_cast<Eigen::Index>(pos.size()), 3);
   for (size_t v = 0; v < pos.size(); ++v) r.V.row(static_cast<Eigen::Index>(v)) = pos[v].transpose();
@@ -127,7 +153,9 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       if (ok) q[t] = it->second;
     }
     if (!ok) {
-      ++missing;
+      if (++missing <= 5)
+        hooks.debug("grid square (label " + std::to_string(label) + ", plane " + std::to_string(c) + ", " +
+                    std::to_string(i) + ", " + std::to_string(j) + ") misses a corner");
       continue;
     }
     if (label % 2) std::swap(q[1], q[3]);  // -k: clockwise in (a, b) is counter-clockwise seen from -k
