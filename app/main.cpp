@@ -181,6 +181,10 @@ int main(int argc, char** argv) {
                "axis-aligned and are kept). Not with --hex");
   bool run_quad = false;
   app.add_flag("--quad", run_quad, "Run through to the quad mesh of the surface (same as --until quad)");
+  app.add_option("--surface-retry", opt.surface_retry_barrier,
+                 "Surface mode: if no valid polycube is realized, deform again with the anti-foldover barrier "
+                 "weight times this (<= 1: no retry)")
+      ->capture_default_str();
   app.add_option("--quads", opt.target_quads, "Quad mesh: approximate number of quads (0 = the hex grid's resolution; 2000 with --surface)")
       ->capture_default_str()->check(CLI::Range(0, 100000000));
   app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")

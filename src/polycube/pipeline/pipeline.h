@@ -39,6 +39,9 @@ struct PipelineOptions {
   /// Open surfaces are accepted (their borders become axis-aligned and stay in the quad mesh).
   /// Hexes need the volume: Stage::Hex is refused.
   bool surface = false;
+  /// Surface mode: when no valid polycube is realized, deform again with the anti-foldover
+  /// barrier weight times this and extract again (values <= 1: no retry).
+  double surface_retry_barrier = 10;
   Stage until = Stage::Tet;    ///< stop after this stage
   bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
   io::CadOptions cad;
