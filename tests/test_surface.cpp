@@ -351,3 +351,18 @@ TEST(SurfaceCli, ExampleInSurfaceModeIsFast) {
   EXPECT_EQ(rep["quad"]["inverted"], 0);
   EXPECT_GT(rep["quad"]["sj_min"].get<double>(), 0.5);
 }
+
+TEST(SurfaceCli, QuadCountAloneAsksForQuads) {
+  // --quads N without --quad runs to the quads (it used to stop at the polycube silently).
+  const std::string dir = temp_dir("surface_cli_quads_alone");
+  RunResult r = run_cli("--example box_hole --surface --quads 600 -o " + dir + "/out -q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto rep = nlohmann::json::parse(read_text(dir + "/out/report.json"));
+  ASSERT_TRUE(rep.contains("quad")) << rep.dump();
+  EXPECT_NEAR(rep["quad"]["count"].get<double>(), 600, 120);
+  EXPECT_TRUE(std::filesystem::exists(dir + "/out/quad.obj"));
+  // An explicit --until wins (no quads); --hexes alone asks for hexes, which surface mode refuses.
+  EXPECT_EQ(run_cli("--example box_hole --surface --quads 600 --until polycube -o " + dir + "/o2 -q").code, 0);
+  EXPECT_FALSE(std::filesystem::exists(dir + "/o2/quad.obj"));
+  EXPECT_EQ(run_cli("--example box_hole --surface --hexes 600 -o " + dir + "/o3 -q").code, 2);
+}
