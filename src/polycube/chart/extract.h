@@ -13,9 +13,9 @@ struct ExtractOptions {
   /// Surface mode: when the realization leaves at most this many triangles folded, edge flips
   /// inside their charts are tried (see PolycubeExtraction::flipped_B); 0 = off.
   int max_flip_faces = 20;
-  /// Surface mode: rounds of edge collapses (collapse_folded_edges, then a new realization) when
-  /// edge flips leave triangles folded; 0 = off.
-  int collapse_rounds = 3;
+  /// Surface mode: rounds of edge collapses (collapse_folded_edges, then a realization from the
+  /// collapsed layout) when edge flips leave triangles folded; 0 = off.
+  int collapse_rounds = 5;
   /// Triangles whose deformed area is below this fraction of the median deformed/rest area ratio
   /// take their neighbours' label before cleanup (relabel_collapsed); 0 = off.
   double collapsed_ratio = 1e-3;
