@@ -441,8 +441,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (!ex.realized.success && opt.surface && opt.surface_retry_barrier > 1) {
         // Surface mode: nothing but the anti-foldover barrier keeps the surface from folding into
         // thin fins (triangles of opposite normals pressed together at a corner), which no
-        // polycube realizes; deform again with a stronger barrier (rocker: 3 folds left at 0.01,
-        // an exact polycube at 0.1; it is not the default because spot fails at 0.1).
+        // polycube realizes; deform again with a stronger barrier (rocker, before the collapse
+        // rounds: 3 folds left at 0.01, an exact polycube at 0.1; not the default because spot
+        // fails at 0.1).
         const double w = opt.deform.barrier_weight * opt.surface_retry_barrier;
         const std::string first = ex.realized.failure;
         hooks.warn("no valid polycube (" + first + "); deforming again with the anti-foldover barrier at " +
