@@ -2,6 +2,8 @@
 #include <map>
 
 #include "polycube/chart/labeling.h"
+#include "polycube/geometry/feature_capture.h"
+#include "polycube/geometry/features.h"
 #include "polycube/hex/extract.h"
 #include "polycube/quad/quad.h"
 #include "test_util.h"
@@ -85,4 +87,91 @@ TEST(Quad, FoldedQuadOnAFeatureIsUntangled) {
   const quad::QuadResult q = quad::quad_mesh_from_hexes(h.V, h.H, s);
   EXPECT_EQ(q.quality.inverted, 0);
   EXPECT_GT(q.quality.sj_min, 0.5);
+}
+
+TEST(Quad, SharpChainsOfABoxAreItsTwelveEdges) {
+  const SurfaceMesh s = grid_box(3);
+  const std::vector<std::vector<int>> chains = geometry::sharp_chains(s, geometry::sharp_edges(s, 30));
+  ASSERT_EQ(chains.size(), 12u);
+  for (const std::vector<int>& c : chains) {
+    ASSERT_EQ(c.size(), 4u);  // 3 segments from corner to corner
+    const Vec3 d = (s.V.row(c.back()) - s.V.row(c.front())).transpose();
+    EXPECT_NEAR(d.norm(), 1.0, 1e-12);
+    EXPECT_NEAR(d.cwiseAbs().maxCoeff(), 1.0, 1e-12);  // along one axis
+  }
+}
+
+TEST(Quad, CreaseNoQuadEdgeFollowsIsCaptured) {
+  // The box's grid with the three inner vertices of one box edge (x = y = 0) moved 0.1 onto the
+  // face x = 0: the quads chamfer that edge. The smoothing alone keeps them on their face; the
+  // capture moves that path of quad edges back onto the edge: the box grid again.
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 1, 1));
+  hex::HexResult h = grid_of_box(s);
+  int moved = 0;
+  for (int v = 0; v < h.V.rows(); ++v)
+    if (std::abs(h.V(v, 0)) < 1e-12 && std::abs(h.V(v, 1)) < 1e-12 && h.V(v, 2) > 0.1 && h.V(v, 2) < 0.9) {
+      h.V(v, 1) = 0.1;
+      ++moved;
+    }
+  ASSERT_EQ(moved, 3);
+  auto hausdorff = [&](const quad::QuadResult& q) {
+    return hex::hausdorff(q.V, hex::triangulate_quads(q.Q), s.V, s.F, 20000).max;
+  };
+  quad::QuadOptions off;
+  off.capture_creases = false;
+  const quad::QuadResult a = quad::quad_mesh_from_hexes(h.V, h.H, s, off);
+  EXPECT_LT(a.creases_after.followed, 0.95);
+  EXPECT_GT(hausdorff(a), 0.05);
+  const quad::QuadResult b = quad::quad_mesh_from_hexes(h.V, h.H, s);
+  EXPECT_EQ(b.crease_runs, 1);
+  EXPECT_EQ(b.crease_captured, 1);
+  EXPECT_EQ(b.crease_moved, 3);
+  EXPECT_LT(b.creases_before.followed, 0.95);
+  EXPECT_DOUBLE_EQ(b.creases_after.followed, 1.0);
+  EXPECT_LT(hausdorff(b), 1e-9);
+  EXPECT_GT(b.quality.sj_min, 0.999);
+}
+
+TEST(Quad, CaptureThatWouldFoldQuadsIsUndone) {
+  // A crease across the grid: the surface z = 0 bent up by 45 degrees along the diagonal line
+  // x + y = 1 (a sharp edge no grid line follows). A path of grid edges onto it is a staircase
+  // whose quads would fold or flatten, so the capture is undone and the mesh is left as smoothed.
+  const int n = 20;
+  auto height = [](double x, double y) { return std::max(0.0, (x + y - 1) / std::sqrt(2.0)); };
+  SurfaceMesh s;
+  s.V.resize((n + 1) * (n + 1), 3);
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= n; ++j) {
+      const double x = double(i) / n, y = double(j) / n;
+      s.V.row(i * (n + 1) + j) << x, y, height(x, y);
+    }
+  s.F.resize(2 * n * n, 3);
+  for (int i = 0, f = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const int a = i * (n + 1) + j, b = a + n + 1;
+      // Split along the anti-diagonal so that the crease x + y = 1 is made of edges.
+      s.F.row(f++) << a, b, a + 1;
+      s.F.row(f++) << b, b + 1, a + 1;
+    }
+  quad::QuadResult r;
+  const int m = 6;
+  r.V.resize((m + 1) * (m + 1), 3);
+  for (int i = 0; i <= m; ++i)
+    for (int j = 0; j <= m; ++j) {
+      const double x = double(i) / m, y = double(j) / m;
+      r.V.row(i * (m + 1) + j) << x, y, height(x, y);
+    }
+  r.Q.resize(m * m, 4);
+  for (int i = 0, q = 0; i < m; ++i)
+    for (int j = 0; j < m; ++j) {
+      const int a = i * (m + 1) + j;
+      r.Q.row(q++) << a, a + m + 1, a + m + 2, a + 1;
+    }
+  std::vector<char> pinned(r.V.rows(), 0);
+  for (int i = 0; i <= m; ++i)
+    for (int j = 0; j <= m; ++j) pinned[i * (m + 1) + j] = i == 0 || j == 0 || i == m || j == m;
+  quad::smooth_on_surface(r, s, {}, {}, pinned);
+  EXPECT_EQ(r.quality.inverted, 0);
+  EXPECT_GE(r.quality.sj_min, std::min(0.3, r.extracted.sj_min) - 1e-12);
+  EXPECT_GE(r.crease_runs, 1);
 }

@@ -212,7 +212,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   const std::vector<double> arap_values = sys.values();
   const double arap_diag = sys.mean_diagonal();
 
-  double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0;
+  double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0;
   bool factor_valid = false, stalled = false;
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
@@ -270,7 +270,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         for (int tries = 0; tries < 8 && !ok; ++tries) {
           sys.values() = assembled;
           sys.add_diagonal(mu);
+          Stopwatch sw_f;
           ok = sys.factorize();
+          t_numfac += sw_f.seconds();
           if (!ok) mu *= 100;
         }
         if (!ok) {
@@ -366,7 +368,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   {
     std::ostringstream os;
     os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
-       << " s, line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
+       << " s (numeric factorizations " << t_numfac << " s), line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
        << " factorizations, " << cg_iterations << " preconditioned CG iterations";
     hooks.debug(os.str());
   }

@@ -649,6 +649,13 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"hausdorff_rel", hd.max / box.diagonal().norm()},
                           {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
                           {"smooth_moves", qr.smooth_moves},
+                          {"creases", {{"runs", qr.crease_runs},
+                                       {"captured", qr.crease_captured},
+                                       {"moved_vertices", qr.crease_moved},
+                                       {"followed_before", qr.creases_before.followed},
+                                       {"followed_after", qr.creases_after.followed},
+                                       {"max_gap_before_rel", qr.creases_before.max_gap / box.diagonal().norm()},
+                                       {"max_gap_after_rel", qr.creases_after.max_gap / box.diagonal().norm()}}},
                           {"grid", grid},
                           {"seconds", sq.seconds()}};
         report["quad"].update(extra);
@@ -706,6 +713,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                       {"min_slab_ratio", hr.min_slab_ratio}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["sharp_vertices"] = hr.sharp_vertices;
+        hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}, {"moved_vertices", hr.crease_moved}};
         hj["variants"] = json::array();
         for (const auto& t : hr.tried)
           hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});

@@ -5,6 +5,7 @@
 
 #include "polycube/core/topology.h"
 #include "polycube/geometry/closest_point.h"
+#include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/features.h"
 #include "polycube/hex/quality.h"
 
@@ -15,6 +16,9 @@ namespace {
 constexpr double kCrossPatchBelow = 0.3;
 /// Feature vertices of quads worse than this move too (a folded or nearly flat quad on a feature).
 constexpr double kFreeFeatureBelow = 0.1;
+/// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
+/// (or below the worst quad without any capture, if lower).
+constexpr double kCaptureMinQuality = 0.3;
 }  // namespace
 
 double scaled_jacobian(const std::array<Vec3, 4>& p) {
@@ -75,6 +79,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
                        const std::vector<char>& pinned) {
   const int n = static_cast<int>(r.V.rows());
   r.extracted = quad_quality(r.V, r.Q);
+  const MatX3d extracted_V = r.V;
 
   // Neighbours, valence, incident quads.
   std::vector<std::vector<int>> nb(n), vq(n);
@@ -108,7 +113,6 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
     const Vec3 p = r.V.row(v).transpose();
     fixed[v] = geometry::near_sharp_edge(target, sharp, adj, tree, p, 0.05 * elen);
     patch[v] = patch_of_face[tree.closest(p).face];
-    r.feature_vertices += fixed[v];
   }
   auto worst = [&](int v) {
     double m = 1e300;
@@ -119,40 +123,108 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
     }
     return m;
   };
-  for (int it = 0; it < opt.smooth_iterations; ++it) {
-    hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
-    int moves = 0;
-    for (int v = 0; v < n; ++v) {
-      if (nb[v].empty() || (!pinned.empty() && pinned[v])) continue;
-      // A feature vertex stays, unless one of its quads is folded or nearly flat: then it may move,
-      // and like the vertices of poor quads (< kCrossPatchBelow) it may leave its patch.
-      const double before = worst(v);
-      if (fixed[v] && before > kFreeFeatureBelow) continue;
-      const bool cross = before < kCrossPatchBelow;
-      Vec3 c = Vec3::Zero();
-      for (int u : nb[v]) c += r.V.row(u).transpose();
-      c /= static_cast<double>(nb[v].size());
-      Vec3 nrm = Vec3::Zero();
-      for (int q : vq[v]) {
-        const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
-        nrm += (cc - a).cross(d - b);
-      }
-      const Vec3 x = r.V.row(v).transpose();
-      for (double t : {1.0, 0.5, 0.25}) {
-        const Vec3 p = cross ? tree.closest(x + t * (c - x), &nrm).point
-                             : tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
-        r.V.row(v) = p.transpose();
-        const double after = worst(v);
-        if (after > before + 1e-9 || (after >= before && after > 0.3)) {
-          ++moves;
-          break;
+  auto smooth = [&]() {
+    for (int it = 0; it < opt.smooth_iterations; ++it) {
+      hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
+      int moves = 0;
+      for (int v = 0; v < n; ++v) {
+        if (nb[v].empty() || (!pinned.empty() && pinned[v])) continue;
+        // A feature vertex stays, unless one of its quads is folded or nearly flat: then it may move,
+        // and like the vertices of poor quads (< kCrossPatchBelow) it may leave its patch.
+        const double before = worst(v);
+        if (fixed[v] && before > kFreeFeatureBelow) continue;
+        const bool cross = before < kCrossPatchBelow;
+        Vec3 c = Vec3::Zero();
+        for (int u : nb[v]) c += r.V.row(u).transpose();
+        c /= static_cast<double>(nb[v].size());
+        Vec3 nrm = Vec3::Zero();
+        for (int q : vq[v]) {
+          const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
+          nrm += (cc - a).cross(d - b);
         }
-        r.V.row(v) = x.transpose();
+        const Vec3 x = r.V.row(v).transpose();
+        for (double t : {1.0, 0.5, 0.25}) {
+          const Vec3 p = cross ? tree.closest(x + t * (c - x), &nrm).point
+                               : tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
+          r.V.row(v) = p.transpose();
+          const double after = worst(v);
+          if (after > before + 1e-9 || (after >= before && after > 0.3)) {
+            ++moves;
+            break;
+          }
+          r.V.row(v) = x.transpose();
+        }
+      }
+      r.smooth_moves += moves;
+      if (moves == 0) break;
+    }
+  };
+  // Creases no quad edge follows: the nearest path of quad edges is moved onto them and stays. A
+  // capture is undone when its quads are still poor after smoothing (a crease running across the
+  // grid), or when the input near it ends farther from the quads than without it.
+  smooth();
+  const std::vector<unsigned char> creases =
+      geometry::crease_edges(target, opt.sharp_angle_deg, opt.capture_angle_deg);
+  if (opt.capture_creases) {
+    const MatX3d base = r.V;
+    const std::vector<char> base_fixed = fixed;
+    const double base_min = quad_quality(base, r.Q).sj_min;
+    r.V = extracted_V;
+    std::vector<char> locked(n, 0), snapped;
+    for (int v = 0; v < n; ++v) locked[v] = fixed[v] || (!pinned.empty() && pinned[v]);
+    const geometry::FeatureCaptureStats fc =
+        geometry::capture_sharp_edges(r.V, r.Q, target, creases, locked, nullptr, snapped);
+    r.crease_runs = fc.runs;
+    r.creases_before = geometry::crease_coverage(base, r.Q, target, creases);
+    for (int v = 0; v < n; ++v) fixed[v] = fixed[v] || snapped[v];
+    smooth();
+    // Largest distance to quads (V, r.Q) from the crease points of a run and the input vertices near it.
+    const MatX3i QT = hex::triangulate_quads(r.Q);
+    const geometry::TriangleTree base_tree(base, QT);
+    auto farthest = [&](const geometry::TriangleTree& t, const geometry::FeatureCaptureStats::Run& run) {
+      double d = 0;
+      for (const Vec3& p : run.crease) d = std::max(d, t.closest(p).dist2);
+      for (int i = 0; i < target.V.rows(); ++i)
+        for (int v : run.vertices)
+          if ((target.V.row(i) - extracted_V.row(v)).norm() < 1.5 * elen) {
+            d = std::max(d, t.closest(target.V.row(i).transpose()).dist2);
+            break;
+          }
+      return std::sqrt(d);
+    };
+    bool undone = false;
+    {
+      const geometry::TriangleTree now_tree(r.V, QT);
+      for (const geometry::FeatureCaptureStats::Run& run : fc.captured_runs) {
+        double m = 1e300;
+        for (int v : run.vertices) m = std::min(m, worst(v));
+        if (m >= std::min(kCaptureMinQuality, base_min) && farthest(now_tree, run) < farthest(base_tree, run)) {
+          ++r.crease_captured;
+          r.crease_moved += static_cast<int>(run.vertices.size());
+          continue;
+        }
+        // Back to the smoothed mesh without the capture around the run.
+        undone = true;
+        for (int u = 0; u < n; ++u)
+          for (int v : run.vertices)
+            if ((extracted_V.row(u) - extracted_V.row(v)).norm() < 2 * elen) {
+              r.V.row(u) = base.row(u);
+              fixed[u] = base_fixed[u];
+              break;
+            }
       }
     }
-    r.smooth_moves += moves;
-    if (moves == 0) break;
+    if (r.crease_captured == 0) {
+      r.V = base;
+      fixed = base_fixed;
+    } else if (undone) {
+      smooth();
+    }
+    r.creases_after = geometry::crease_coverage(r.V, r.Q, target, creases);
+  } else {
+    r.creases_before = r.creases_after = geometry::crease_coverage(r.V, r.Q, target, creases);
   }
+  for (int v = 0; v < n; ++v) r.feature_vertices += fixed[v];
   r.quality = quad_quality(r.V, r.Q);
   hooks.report("quad", 1);
 }

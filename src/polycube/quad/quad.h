@@ -10,6 +10,7 @@
 
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
+#include "polycube/geometry/feature_capture.h"
 #include "polycube/hex/quality.h"
 
 namespace polycube::quad {
@@ -25,6 +26,12 @@ QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q);
 struct QuadOptions {
   int smooth_iterations = 30;    ///< smoothing sweeps on the surface (0 = off)
   double sharp_angle_deg = 30;   ///< dihedral angle above which an input edge is a sharp feature
+  /// Move paths of quad edges onto the sharp edges no quad edge follows (creases the polycube has no
+  /// edge along), before smoothing (geometry/feature_capture.h).
+  bool capture_creases = true;
+  /// Chains of sharp edges are creases to capture when one of their edges is sharper than this:
+  /// the facets of a coarse smooth surface are not taken for creases (geometry::crease_edges).
+  double capture_angle_deg = 45;
 };
 
 struct QuadResult {
@@ -34,6 +41,11 @@ struct QuadResult {
   int feature_vertices = 0;      ///< vertices kept on sharp edges of the input
   QuadQuality extracted, quality;
   int smooth_moves = 0;
+  int crease_runs = 0;           ///< runs of sharp edges no quad edge followed after the extraction
+  int crease_captured = 0;       ///< of those, runs a path of quad edges was moved onto
+  int crease_moved = 0;          ///< vertices moved onto sharp edges
+  geometry::CreaseCoverage creases_before;  ///< how quad edges follow the sharp edges without the capture
+  geometry::CreaseCoverage creases_after;   ///< and with it
   double seconds = 0;
   // Surface mode (quad_mesh_from_surface_polycube):
   double cells_per_unit = 0;              ///< grid cells per length unit of the polycube

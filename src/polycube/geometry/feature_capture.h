@@ -1,0 +1,64 @@
+// Capture of sharp edges by a quad mesh lying on a surface: where a sharp edge of the surface (a
+// crease of a CAD part) is followed by no edge of the quad mesh, the nearest path of quad edges is
+// moved onto it. A polycube edge can only follow a crease that runs between two charts from
+// corner to corner; creases that fade out inside a face (fandisk), or that the layout missed, are
+// otherwise cut by the quads and dominate the Hausdorff distance.
+#pragma once
+#include <functional>
+#include <vector>
+
+#include "polycube/core/types.h"
+
+namespace polycube::geometry {
+
+/// Chains of sharp edges of s (`sharp` as from sharp_edges; open edges are left out): polylines of
+/// vertex ids split at vertices with other than two sharp edges. A closed loop repeats its first
+/// vertex at the end.
+std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vector<unsigned char>& sharp);
+
+/// Creases of s: the sharp edges (sharp_edges bitmask, open edges left out) of the chains of edges
+/// sharper than `weak_deg` that have at least one edge sharper than `strong_deg`. A crease of a CAD
+/// part that fades out keeps its weak end; the facets of a coarse smooth surface (all weak) go.
+std::vector<unsigned char> crease_edges(const SurfaceMesh& s, double weak_deg, double strong_deg);
+
+struct FeatureCaptureOptions {
+  double cover_tolerance = 0.1;  ///< a crease point is followed when a mesh edge passes within this x edge length
+  double corridor = 1.2;        ///< vertices move onto a crease only from within this x edge length of it
+  double min_run = 0.75;         ///< runs of unfollowed crease shorter than this x edge length are left
+  double min_quality = 0.2;      ///< a capture is undone when an element around it falls below this
+};
+
+struct FeatureCaptureStats {
+  int runs = 0;        ///< runs of crease followed by no mesh edge
+  int captured = 0;    ///< of those, runs a path of mesh edges was moved onto
+  int moved = 0;       ///< vertices moved onto creases
+  struct Run {
+    std::vector<int> vertices;  ///< the mesh vertices moved onto the crease
+    std::vector<Vec3> crease;   ///< points along the run of crease
+  };
+  std::vector<Run> captured_runs;
+};
+
+/// Moves paths of edges of the quad mesh (V, Q), which lies on s, onto the chains of s that none
+/// of its edges follows (within cover_tolerance x elen, elen: the mean quad edge length). A path
+/// runs between the mesh vertices nearest the ends of an unfollowed run, through vertices within
+/// `corridor` x elen of it, each vertex moved to its closest point on the run in order along it.
+/// `locked` vertices (may be empty) never move. `quality(vertices)`, if given, returns the worst
+/// element quality around the given vertices (with V as it is): a capture that drops it below
+/// min_quality (and below what it was) is undone; without it the caller judges the captures after
+/// relaxing their neighbourhood (see captured_runs). `snapped` (resized to V.rows()) flags the moved
+/// vertices.
+FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const SurfaceMesh& s,
+                                        const std::vector<unsigned char>& sharp, const std::vector<char>& locked,
+                                        const std::function<double(const std::vector<int>&)>& quality,
+                                        std::vector<char>& snapped, const FeatureCaptureOptions& opt = {});
+
+/// How well the edges of the quad mesh (V, Q) follow the chains of sharp edges of s.
+struct CreaseCoverage {
+  double max_gap = 0;   ///< largest distance of a crease point to the quad edges (at most 2 x elen)
+  double followed = 1;  ///< fraction of crease points within tolerance x elen of a quad edge
+};
+CreaseCoverage crease_coverage(const MatX3d& V, const MatX4i& Q, const SurfaceMesh& s,
+                               const std::vector<unsigned char>& sharp, double tolerance = 0.1);
+
+}  // namespace polycube::geometry
