@@ -206,7 +206,6 @@ std::vector<unsigned char> crease_edges(const SurfaceMesh& s, double weak_deg, d
 
 FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const SurfaceMesh& s,
                                         const std::vector<unsigned char>& sharp, const std::vector<char>& locked,
-                                        const std::function<double(const std::vector<int>&)>& quality,
                                         std::vector<char>& snapped, const FeatureCaptureOptions& opt) {
   FeatureCaptureStats st;
   const int n = static_cast<int>(V.rows());
@@ -322,19 +321,7 @@ FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const Surfac
       moved.push_back(static_cast<int>(i));
     }
     if (!ok || moved.empty()) continue;
-    const double before = quality ? quality(path) : 0.0;
-    std::vector<Vec3> old(path.size());
-    for (int i : moved) {
-      old[i] = V.row(path[i]).transpose();
-      V.row(path[i]) = target[i].transpose();
-    }
-    if (quality) {
-      const double after = quality(path);
-      if (after < opt.min_quality && after < before) {
-        for (int i : moved) V.row(path[i]) = old[i].transpose();
-        continue;
-      }
-    }
+    for (int i : moved) V.row(path[i]) = target[i].transpose();
     ++st.captured;
     std::vector<int> ids;
     for (int i : moved) {

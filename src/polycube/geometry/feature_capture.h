@@ -4,7 +4,6 @@
 // corner to corner; creases that fade out inside a face (fandisk), or that the layout missed, are
 // otherwise cut by the quads and dominate the Hausdorff distance.
 #pragma once
-#include <functional>
 #include <vector>
 
 #include "polycube/core/types.h"
@@ -25,7 +24,6 @@ struct FeatureCaptureOptions {
   double cover_tolerance = 0.1;  ///< a crease point is followed when a mesh edge passes within this x edge length
   double corridor = 1.2;        ///< vertices move onto a crease only from within this x edge length of it
   double min_run = 0.75;         ///< runs of unfollowed crease shorter than this x edge length are left
-  double min_quality = 0.2;      ///< a capture is undone when an element around it falls below this
 };
 
 struct FeatureCaptureStats {
@@ -43,14 +41,11 @@ struct FeatureCaptureStats {
 /// of its edges follows (within cover_tolerance x elen, elen: the mean quad edge length). A path
 /// runs between the mesh vertices nearest the ends of an unfollowed run, through vertices within
 /// `corridor` x elen of it, each vertex moved to its closest point on the run in order along it.
-/// `locked` vertices (may be empty) never move. `quality(vertices)`, if given, returns the worst
-/// element quality around the given vertices (with V as it is): a capture that drops it below
-/// min_quality (and below what it was) is undone; without it the caller judges the captures after
-/// relaxing their neighbourhood (see captured_runs). `snapped` (resized to V.rows()) flags the moved
-/// vertices.
+/// `locked` vertices (may be empty) never move. The caller judges the captures (captured_runs)
+/// after relaxing their neighbourhood and undoes the poor ones. `snapped` (resized to V.rows())
+/// flags the moved vertices.
 FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const SurfaceMesh& s,
                                         const std::vector<unsigned char>& sharp, const std::vector<char>& locked,
-                                        const std::function<double(const std::vector<int>&)>& quality,
                                         std::vector<char>& snapped, const FeatureCaptureOptions& opt = {});
 
 /// How well the edges of the quad mesh (V, Q) follow the chains of sharp edges of s.

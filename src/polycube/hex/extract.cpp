@@ -9,7 +9,6 @@
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/geometry/closest_point.h"
-#include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/features.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/optimize.h"
@@ -241,34 +240,6 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       if (!on_corner) feature[v] = 0;
     }
     r.sharp_vertices += feature[v] || slide[v][0] >= 0;
-  }
-
-  // ---- creases no polycube edge follows -------------------------------------------------------
-  // The nearest path of boundary hex edges is moved onto each, where the hexes around stay fair.
-  if (tree && opt.capture_creases) {
-    std::vector<std::vector<int>> vh(nv);
-    for (int h = 0; h < H.rows(); ++h)
-      for (int i = 0; i < 8; ++i) vh[H(h, i)].push_back(h);
-    auto around = [&](const std::vector<int>& vs) {
-      double m = 1e300;
-      for (int v : vs)
-        for (int h : vh[v]) m = std::min(m, scaled_jacobian(V, H, h));
-      return m;
-    };
-    std::vector<char> locked(nv, 0), snapped;
-    for (int v = 0; v < nv; ++v) locked[v] = !on_boundary[v] || feature[v] || slide[v][0] >= 0;
-    geometry::FeatureCaptureOptions fo;
-    fo.min_quality = 0.02;
-    const geometry::FeatureCaptureStats fc = geometry::capture_sharp_edges(
-        V, Q, *target, geometry::crease_edges(*target, opt.sharp_angle_deg, opt.capture_angle_deg), locked, around, snapped, fo);
-    r.crease_runs = fc.runs;
-    r.crease_captured = fc.captured;
-    r.crease_moved = fc.moved;
-    for (int v = 0; v < nv; ++v)
-      if (snapped[v]) {
-        feature[v] = 1;
-        ++r.sharp_vertices;
-      }
   }
 
   // ---- pillowing and optimization -----------------------------------------------------------

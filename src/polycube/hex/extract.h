@@ -56,11 +56,6 @@ struct HexOptions {
   /// Pillow layer thickness: each boundary vertex's inner copy starts this fraction of the way to
   /// the mean centroid of its hexes.
   double pillow_thickness = 0.5;
-  /// Move paths of boundary hex edges onto the creases of the target that no hex edge follows
-  /// (chains of sharp edges with one sharper than capture_angle_deg; geometry/feature_capture.h) where the hexes around stay at
-  /// or above min(0.3, their scaled Jacobian before); they then stay there.
-  bool capture_creases = true;
-  double capture_angle_deg = 45;
 };
 
 struct HexResult {
@@ -77,9 +72,6 @@ struct HexResult {
   int grid_hexes = 0;             ///< hexes of the grid (before pillowing)
   int pillow_hexes = 0;           ///< hexes of the boundary layer (0: not pillowed)
   int sharp_vertices = 0;         ///< grid vertices kept on sharp features of the target (fixed or sliding)
-  int crease_runs = 0;            ///< runs of creases no boundary hex edge followed after projection
-  int crease_captured = 0;        ///< of those, runs a path of boundary hex edges was moved onto
-  int crease_moved = 0;           ///< boundary vertices moved onto creases (then fixed)
   struct Tried {
     std::string variant;          ///< "no_pillow" or "pillow"
     double sj_min = 0, sj_mean = 0;

@@ -713,7 +713,6 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                       {"min_slab_ratio", hr.min_slab_ratio}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["sharp_vertices"] = hr.sharp_vertices;
-        hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}, {"moved_vertices", hr.crease_moved}};
         hj["variants"] = json::array();
         for (const auto& t : hr.tried)
           hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});

@@ -173,7 +173,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
     std::vector<char> locked(n, 0), snapped;
     for (int v = 0; v < n; ++v) locked[v] = fixed[v] || (!pinned.empty() && pinned[v]);
     const geometry::FeatureCaptureStats fc =
-        geometry::capture_sharp_edges(r.V, r.Q, target, creases, locked, nullptr, snapped);
+        geometry::capture_sharp_edges(r.V, r.Q, target, creases, locked, snapped);
     r.crease_runs = fc.runs;
     r.creases_before = geometry::crease_coverage(base, r.Q, target, creases);
     for (int v = 0; v < n; ++v) fixed[v] = fixed[v] || snapped[v];
