@@ -189,6 +189,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 100000000));
   app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  bool no_creases = false;
+  app.add_flag("--no-crease-capture", no_creases,
+               "Quad mesh: do not move quad edges onto the creases of the input that no polycube edge follows");
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");
@@ -200,6 +203,7 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  if (no_creases) opt.quad.capture_creases = false;
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size
   // to the hexes.
   if (!run_hex && !run_quad && app.count("--until") == 0) {

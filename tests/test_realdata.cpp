@@ -153,3 +153,23 @@ TEST_P(RealSurfaceQuads, ReachesAnExactSurfacePolycubeAndValidQuads) {
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealSurfaceQuads, ::testing::Values("basic/eight.off", "cad/mambo_B3.stl"),
                          test_name);
+
+// cad/joint.obj in surface mode: creases its polycube has no edge along are cut by the quads
+// (Hausdorff 10.2e-3 without the capture); quad edges moved onto them bring it under 9e-3.
+TEST(RealSurfaceQuadsCreases, CreasesOfTheJointAreCaptured) {
+  const std::string path = shared_dir() + "/meshes/cad/joint.obj";
+  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir("real_surface_creases");
+  opt.surface = true;
+  opt.until = Stage::Quad;
+  nlohmann::json j = run_pipeline(opt);
+  const auto& q = j["quad"];
+  const auto& c = q["creases"];
+  EXPECT_EQ(q["inverted"], 0);
+  EXPECT_GE(c["captured"].get<int>(), 1) << c.dump();
+  EXPECT_LT(c["max_gap_after_rel"].get<double>(), c["max_gap_before_rel"].get<double>()) << c.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 9e-3) << q.dump();
+  EXPECT_GT(q["sj_min"].get<double>(), 0.1) << q.dump();
+}
