@@ -105,23 +105,30 @@ BucketGrid edge_grid(const MatX3d& V, const std::vector<std::array<int, 2>>& edg
   return g;
 }
 
-// Distance from p to the nearest edge, at most `radius`.
+// Distance from p to the nearest edge running along `tangent` (within 45 degrees; edges across a
+// crease do not follow it), at most `radius`.
 double edge_distance(const BucketGrid& g, const MatX3d& V, const std::vector<std::array<int, 2>>& edges, const Vec3& p,
-                     double radius) {
+                     const Vec3& tangent, double radius) {
   double d = radius;
-  g.visit(p, radius, [&](int i) { d = std::min(d, point_segment_distance(p, V.row(edges[i][0]), V.row(edges[i][1]))); });
+  g.visit(p, radius, [&](int i) {
+    const Vec3 a = V.row(edges[i][0]), b = V.row(edges[i][1]);
+    const double l = (b - a).norm();
+    if (l > 0 && std::abs((b - a).dot(tangent)) >= std::sqrt(0.5) * l) d = std::min(d, point_segment_distance(p, a, b));
+  });
   return d;
 }
 
-// Points along a chain at most `step` apart, its vertices included.
-std::vector<Vec3> chain_samples(const SurfaceMesh& s, const std::vector<int>& c, double step) {
-  std::vector<Vec3> pts;
+// Points along a chain at most `step` apart, its vertices included, with the unit tangent there.
+std::vector<std::pair<Vec3, Vec3>> chain_samples(const SurfaceMesh& s, const std::vector<int>& c, double step) {
+  std::vector<std::pair<Vec3, Vec3>> pts;
+  Vec3 t = Vec3::UnitX();
   for (size_t i = 0; i + 1 < c.size(); ++i) {
     const Vec3 a = s.V.row(c[i]), b = s.V.row(c[i + 1]);
+    if ((b - a).norm() > 0) t = (b - a).normalized();
     const int k = std::max(1, static_cast<int>(std::ceil((b - a).norm() / step)));
-    for (int j = 0; j < k; ++j) pts.push_back(a + (b - a) * (static_cast<double>(j) / k));
+    for (int j = 0; j < k; ++j) pts.push_back({a + (b - a) * (static_cast<double>(j) / k), t});
   }
-  pts.push_back(s.V.row(c.back()));
+  pts.push_back({s.V.row(c.back()), t});
   return pts;
 }
 
@@ -217,9 +224,6 @@ FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const Surfac
   if (!(elen > 0)) return st;
   const double tol = opt.cover_tolerance * elen, corridor = opt.corridor * elen;
 
-  auto gap = [&](const BucketGrid& g, const Vec3& p, double radius) {
-    return edge_distance(g, V, edges, p, radius);
-  };
 
   // Each chain sampled at most a quarter edge length apart; runs of samples no mesh edge passes near.
   struct Run {
@@ -230,10 +234,12 @@ FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const Surfac
   {
     const BucketGrid g = edge_grid(V, edges, elen);
     for (const std::vector<int>& c : sharp_chains(s, sharp)) {
-      const std::vector<Vec3> pts = chain_samples(s, c, 0.25 * elen);
+      const std::vector<std::pair<Vec3, Vec3>> samples = chain_samples(s, c, 0.25 * elen);
+      std::vector<Vec3> pts;
+      for (const auto& [p, t] : samples) pts.push_back(p);
       std::vector<char> cov(pts.size());
       for (size_t i = 0; i < pts.size(); ++i) {
-        cov[i] = gap(g, pts[i], tol) < tol;
+        cov[i] = edge_distance(g, V, edges, samples[i].first, samples[i].second, tol) < tol;
       }
       for (size_t i = 0; i < pts.size();) {
         if (cov[i]) {
@@ -344,8 +350,8 @@ CreaseCoverage crease_coverage(const MatX3d& V, const MatX4i& Q, const SurfaceMe
   const BucketGrid g = edge_grid(V, edges, elen);
   int samples = 0, near = 0;
   for (const std::vector<int>& chain : sharp_chains(s, sharp))
-    for (const Vec3& p : chain_samples(s, chain, 0.25 * elen)) {
-      const double d = edge_distance(g, V, edges, p, 2 * elen);
+    for (const auto& [p, t] : chain_samples(s, chain, 0.25 * elen)) {
+      const double d = edge_distance(g, V, edges, p, t, 2 * elen);
       c.max_gap = std::max(c.max_gap, d);
       ++samples;
       near += d <= tolerance * elen;

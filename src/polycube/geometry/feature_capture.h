@@ -21,7 +21,9 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
 std::vector<unsigned char> crease_edges(const SurfaceMesh& s, double weak_deg, double strong_deg);
 
 struct FeatureCaptureOptions {
-  double cover_tolerance = 0.1;  ///< a crease point is followed when a mesh edge passes within this x edge length
+  /// A crease point is followed when a mesh edge along the crease (within 45 degrees) passes within
+  /// this x edge length.
+  double cover_tolerance = 0.1;
   double corridor = 1.2;        ///< vertices move onto a crease only from within this x edge length of it
   double min_run = 0.75;         ///< runs of unfollowed crease shorter than this x edge length are left
 };
@@ -50,8 +52,8 @@ FeatureCaptureStats capture_sharp_edges(MatX3d& V, const MatX4i& Q, const Surfac
 
 /// How well the edges of the quad mesh (V, Q) follow the chains of sharp edges of s.
 struct CreaseCoverage {
-  double max_gap = 0;   ///< largest distance of a crease point to the quad edges (at most 2 x elen)
-  double followed = 1;  ///< fraction of crease points within tolerance x elen of a quad edge
+  double max_gap = 0;   ///< largest distance of a crease point to the quad edges along it (at most 2 x elen)
+  double followed = 1;  ///< fraction of crease points within tolerance x elen of a quad edge along it
 };
 CreaseCoverage crease_coverage(const MatX3d& V, const MatX4i& Q, const SurfaceMesh& s,
                                const std::vector<unsigned char>& sharp, double tolerance = 0.1);

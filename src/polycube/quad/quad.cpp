@@ -79,7 +79,6 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
                        const std::vector<char>& pinned) {
   const int n = static_cast<int>(r.V.rows());
   r.extracted = quad_quality(r.V, r.Q);
-  const MatX3d extracted_V = r.V;
 
   // Neighbours, valence, incident quads.
   std::vector<std::vector<int>> nb(n), vq(n);
@@ -107,6 +106,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
   double elen = 0;
   for (int q = 0; q < r.Q.rows(); ++q) elen += (r.V.row(r.Q(q, 0)) - r.V.row(r.Q(q, 1))).norm();
   elen /= std::max<Eigen::Index>(1, r.Q.rows());
+  const std::vector<unsigned char> creases =
+      geometry::crease_edges(target, opt.sharp_angle_deg, opt.capture_angle_deg);
   std::vector<char> fixed(n, 0);
   std::vector<int> patch(n, -1);
   for (int v = 0; v < n; ++v) {
@@ -114,6 +115,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
     fixed[v] = geometry::near_sharp_edge(target, sharp, adj, tree, p, 0.05 * elen);
     patch[v] = patch_of_face[tree.closest(p).face];
   }
+  const MatX3d extracted_V = r.V;
   auto worst = [&](int v) {
     double m = 1e300;
     for (int q : vq[v]) {
@@ -161,10 +163,9 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
   };
   // Creases no quad edge follows: the nearest path of quad edges is moved onto them and stays. A
   // capture is undone when its quads are still poor after smoothing (a crease running across the
-  // grid), or when the input near it ends farther from the quads than without it.
+  // grid), or when the input near it ends farther from the quads than without it; all of them when
+  // the worst quad drops below min(0.3, the worst without) or an input vertex ends farther away.
   smooth();
-  const std::vector<unsigned char> creases =
-      geometry::crease_edges(target, opt.sharp_angle_deg, opt.capture_angle_deg);
   if (opt.capture_creases) {
     const MatX3d base = r.V;
     const std::vector<char> base_fixed = fixed;
@@ -214,11 +215,25 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
             }
       }
     }
+    if (undone && r.crease_captured > 0) smooth();
+    // Whole-mesh check: no worse a worst quad (below 0.3), and no input vertex farther from the quads.
+    if (r.crease_captured > 0) {
+      const geometry::TriangleTree now_tree(r.V, QT);
+      double far_base = 0, far_now = 0;
+      for (int i = 0; i < target.V.rows(); ++i) {
+        const Vec3 p = target.V.row(i).transpose();
+        far_base = std::max(far_base, base_tree.closest(p).dist2);
+        far_now = std::max(far_now, now_tree.closest(p).dist2);
+      }
+      if (far_now > far_base * (1 + 1e-9) ||
+          quad_quality(r.V, r.Q).sj_min < std::min(kCaptureMinQuality, base_min) - 1e-9) {
+        r.crease_captured = 0;
+        r.crease_moved = 0;
+      }
+    }
     if (r.crease_captured == 0) {
       r.V = base;
       fixed = base_fixed;
-    } else if (undone) {
-      smooth();
     }
     r.creases_after = geometry::crease_coverage(r.V, r.Q, target, creases);
   } else {
