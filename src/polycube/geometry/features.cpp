@@ -24,17 +24,56 @@ std::vector<unsigned char> sharp_edges(const SurfaceMesh& s, double angle_deg) {
 
 bool near_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
                      const TriangleTree& tree, const Vec3& p, double tol) {
+  Vec3 q;
+  return closest_on_sharp_edge(s, sharp, adj, tree, p, tol, q);
+}
+
+bool closest_on_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
+                           const TriangleTree& tree, const Vec3& p, double tol, Vec3& on_edge) {
   const int f0 = tree.closest(p).face;
+  double best = tol;
+  bool found = false;
   for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
     if (f < 0) continue;
     for (int k = 0; k < 3; ++k) {
       if (!(sharp[f] >> k & 1)) continue;
       const Vec3 a = s.V.row(s.F(f, k)), b = s.V.row(s.F(f, (k + 1) % 3)), ab = b - a;
       const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
-      if ((a + t * ab - p).norm() <= tol) return true;
+      const double d = (a + t * ab - p).norm();
+      if (d <= best) {
+        best = d;
+        found = true;
+        on_edge = a + t * ab;
+      }
     }
   }
-  return false;
+  return found;
+}
+
+std::vector<Vec3> sharp_corners(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, double turn_deg) {
+  std::vector<std::vector<int>> nb(s.V.rows());
+  for (int f = 0; f < s.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (sharp[f] >> k & 1) {
+        const int a = s.F(f, k), b = s.F(f, (k + 1) % 3);
+        nb[a].push_back(b);
+        nb[b].push_back(a);
+      }
+  std::vector<Vec3> out;
+  const double c = std::cos(turn_deg * M_PI / 180);
+  for (int v = 0; v < s.V.rows(); ++v) {
+    std::sort(nb[v].begin(), nb[v].end());
+    nb[v].erase(std::unique(nb[v].begin(), nb[v].end()), nb[v].end());
+    if (nb[v].empty()) continue;
+    bool corner = nb[v].size() != 2;
+    if (!corner) {
+      const Vec3 p = s.V.row(v), d0 = (p - Vec3(s.V.row(nb[v][0]))).normalized(),
+                 d1 = (Vec3(s.V.row(nb[v][1])) - p).normalized();
+      corner = d0.dot(d1) < c;
+    }
+    if (corner) out.push_back(s.V.row(v).transpose());
+  }
+  return out;
 }
 
 std::vector<int> smooth_patches(const SurfaceMesh& s, const std::vector<unsigned char>& sharp) {

@@ -20,4 +20,13 @@ std::vector<int> smooth_patches(const SurfaceMesh& s, const std::vector<unsigned
 bool near_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
                      const TriangleTree& tree, const Vec3& p, double tol);
 
+/// The point of a sharp edge (of the triangles around p's closest point on s) nearest to p, if one
+/// lies within tol.
+bool closest_on_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
+                           const TriangleTree& tree, const Vec3& p, double tol, Vec3& on_edge);
+
+/// Corners of the sharp edges: vertices with other than two sharp edges, or two that turn by more
+/// than turn_deg.
+std::vector<Vec3> sharp_corners(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, double turn_deg = 30);
+
 }  // namespace polycube::geometry

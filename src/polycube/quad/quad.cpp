@@ -16,6 +16,9 @@ namespace {
 constexpr double kCrossPatchBelow = 0.3;
 /// Feature vertices of quads worse than this move too (a folded or nearly flat quad on a feature).
 constexpr double kFreeFeatureBelow = 0.1;
+/// Feature vertices whose worst quad is below this slide along their sharp edge (the moves cut
+/// curved sharp edges a little: mambo_B2 Hausdorff 1.2e-3 -> 2.7e-3 when all slide).
+constexpr double kSlideBelow = 0.4;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
 constexpr double kCaptureMinQuality = 0.3;
@@ -125,6 +128,24 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
     }
     return m;
   };
+  // Feature vertices slide along their sharp edge (to the best of a few positions between their two
+  // neighbours on it, projected back on the edge), except at corners of the sharp edges.
+  const std::vector<Vec3> corners = geometry::sharp_corners(target, sharp);
+  auto slide_ends = [&](int v, int& a, int& b) {
+    a = b = -1;
+    if (!opt.slide_on_features) return false;
+    const Vec3 x = r.V.row(v).transpose();
+    for (const Vec3& c : corners)
+      if ((c - x).norm() < 0.05 * elen) return false;
+    int count = 0;
+    for (int u : nb[v]) {
+      if (!fixed[u]) continue;
+      const Vec3 mid = 0.5 * (x + r.V.row(u).transpose());
+      if (!geometry::near_sharp_edge(target, sharp, adj, tree, mid, 0.05 * elen)) continue;
+      (count++ == 0 ? a : b) = u;
+    }
+    return count == 2;
+  };
   auto smooth = [&]() {
     for (int it = 0; it < opt.smooth_iterations; ++it) {
       hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
@@ -134,7 +155,41 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
         // A feature vertex stays, unless one of its quads is folded or nearly flat: then it may move,
         // and like the vertices of poor quads (< kCrossPatchBelow) it may leave its patch.
         const double before = worst(v);
-        if (fixed[v] && before > kFreeFeatureBelow) continue;
+        if (fixed[v] && before > kFreeFeatureBelow) {
+          int a, b;
+          if (before >= kSlideBelow || !slide_ends(v, a, b)) continue;
+          // The best of a few positions along the edge (towards either neighbour), projected on it.
+          // The two quad edges must not cut the sharp edge more than before (curved sharp edges).
+          const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
+          auto chord_gap = [&](const Vec3& p) {
+            double g = 0;
+            for (int u : {a, b}) {
+              const Vec3 mid = 0.5 * (p + r.V.row(u).transpose());
+              Vec3 q;
+              g = std::max(g, geometry::closest_on_sharp_edge(target, sharp, adj, tree, mid, 0.5 * elen, q)
+                                  ? (q - mid).norm()
+                                  : 0.5 * elen);
+            }
+            return g;
+          };
+          const double gap_limit = std::max(chord_gap(x), 0.05 * elen);
+          Vec3 best_p = x;
+          double best_q = before;
+          for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
+            Vec3 p;
+            if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
+            if (chord_gap(p) > gap_limit) continue;
+            r.V.row(v) = p.transpose();
+            const double q = worst(v);
+            if (q > best_q + 1e-9) {
+              best_q = q;
+              best_p = p;
+            }
+          }
+          r.V.row(v) = best_p.transpose();
+          moves += best_q > before;
+          continue;
+        }
         const bool cross = before < kCrossPatchBelow;
         Vec3 c = Vec3::Zero();
         for (int u : nb[v]) c += r.V.row(u).transpose();

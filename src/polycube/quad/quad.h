@@ -29,6 +29,10 @@ struct QuadOptions {
   /// Move paths of quad edges onto the sharp edges no quad edge follows (creases the polycube has no
   /// edge along), before smoothing (geometry/feature_capture.h).
   bool capture_creases = true;
+  /// Vertices on sharp edges slide along them (the best of a few positions towards their two
+  /// neighbours on the edge) when that raises the worst quad around them; corners of the sharp
+  /// edges (geometry::sharp_corners) stay.
+  bool slide_on_features = true;
   /// Chains of sharp edges are creases to capture when one of their edges is sharper than this:
   /// the facets of a coarse smooth surface are not taken for creases (geometry::crease_edges).
   double capture_angle_deg = 45;
