@@ -175,3 +175,30 @@ TEST(Quad, CaptureThatWouldFoldQuadsIsUndone) {
   EXPECT_GE(r.quality.sj_min, std::min(0.3, r.extracted.sj_min) - 1e-12);
   EXPECT_GE(r.crease_runs, 1);
 }
+
+TEST(Quad, FeatureVerticesSlideAlongTheirSharpEdge) {
+  // The box's grid (4 cells per unit) with a vertex of a box edge moved along that edge most of
+  // the way to its neighbour: the quads on both sides are skewed (the smoothing of the other
+  // vertices leaves 0.86). Sliding along the edge restores them; every vertex stays on the box.
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 1, 1));
+  hex::HexResult h = grid_of_box(s);
+  int moved = -1;
+  for (int v = 0; v < h.V.rows() && moved < 0; ++v)
+    if ((h.V.row(v) - Eigen::RowVector3d(0, 0, 0.5)).norm() < 1e-9) moved = v;
+  ASSERT_GE(moved, 0);
+  h.V(moved, 2) = 0.5 + 0.22;  // its neighbour on the edge is at 0.75
+  quad::QuadOptions fixed_opt;
+  fixed_opt.slide_on_features = false;
+  const quad::QuadResult a = quad::quad_mesh_from_hexes(h.V, h.H, s, fixed_opt);
+  quad::QuadOptions slide_opt;
+  slide_opt.slide_below = 1.0;  // (by default only the vertices of quads below 0.4 slide)
+  const quad::QuadResult b = quad::quad_mesh_from_hexes(h.V, h.H, s, slide_opt);
+  EXPECT_GT(b.quality.sj_min, a.quality.sj_min + 0.1) << a.quality.sj_min << " " << b.quality.sj_min;
+  EXPECT_EQ(b.quality.inverted, 0);
+  // Every vertex is still on the box (on its edges where it was on one).
+  for (int v = 0; v < b.V.rows(); ++v) {
+    const Eigen::RowVector3d p = b.V.row(v);
+    const double d = std::min({p.minCoeff(), 1 - p.maxCoeff()});
+    EXPECT_NEAR(d, 0.0, 1e-9);
+  }
+}

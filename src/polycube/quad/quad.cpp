@@ -16,9 +16,6 @@ namespace {
 constexpr double kCrossPatchBelow = 0.3;
 /// Feature vertices of quads worse than this move too (a folded or nearly flat quad on a feature).
 constexpr double kFreeFeatureBelow = 0.1;
-/// Feature vertices whose worst quad is below this slide along their sharp edge (the moves cut
-/// curved sharp edges a little: mambo_B2 Hausdorff 1.2e-3 -> 2.7e-3 when all slide).
-constexpr double kSlideBelow = 0.4;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
 constexpr double kCaptureMinQuality = 0.3;
@@ -157,7 +154,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
         const double before = worst(v);
         if (fixed[v] && before > kFreeFeatureBelow) {
           int a, b;
-          if (before >= kSlideBelow || !slide_ends(v, a, b)) continue;
+          if (before >= opt.slide_below || !slide_ends(v, a, b)) continue;
           // The best of a few positions along the edge (towards either neighbour), projected on it.
           // The two quad edges must not cut the sharp edge more than before (curved sharp edges).
           const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
