@@ -216,7 +216,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
   // Creases no quad edge follows: the nearest path of quad edges is moved onto them and stays. A
   // capture is undone when its quads are still poor after smoothing (a crease running across the
   // grid), or when the input near it ends farther from the quads than without it; all of them when
-  // the worst quad drops below min(0.3, the worst without) or an input vertex ends farther away.
+  // the worst quad drops below min(0.3, the worst without) or an input vertex ends farther away, or
+  // when the worst quad drops and the input as a whole comes no closer.
   smooth();
   if (opt.capture_creases) {
     const MatX3d base = r.V;
@@ -268,7 +269,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
       }
     }
     if (undone && r.crease_captured > 0) smooth();
-    // Whole-mesh check: no worse a worst quad (below 0.3), and no input vertex farther from the quads.
+    // Whole-mesh check: no worse a worst quad (below 0.3), no input vertex farther from the quads,
+    // and a worse worst quad only for an input closer to the quads.
     if (r.crease_captured > 0) {
       const geometry::TriangleTree now_tree(r.V, QT);
       double far_base = 0, far_now = 0;
@@ -277,8 +279,9 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
         far_base = std::max(far_base, base_tree.closest(p).dist2);
         far_now = std::max(far_now, now_tree.closest(p).dist2);
       }
-      if (far_now > far_base * (1 + 1e-9) ||
-          quad_quality(r.V, r.Q).sj_min < std::min(kCaptureMinQuality, base_min) - 1e-9) {
+      const double now_min = quad_quality(r.V, r.Q).sj_min;
+      if (far_now > far_base * (1 + 1e-9) || now_min < std::min(kCaptureMinQuality, base_min) - 1e-9 ||
+          (now_min < base_min - 1e-3 && far_now > far_base * (1 - 1e-3))) {
         r.crease_captured = 0;
         r.crease_moved = 0;
       }
