@@ -125,15 +125,22 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
 // needs its folded sliver triangles collapsed) and a quad mesh with no inverted quad.
 class RealSurfaceQuads : public ::testing::TestWithParam<std::string> {};
 
+namespace {
+// The report of --surface --quad on `path`, written under a temporary folder named by `tag`.
+nlohmann::json surface_quads(const std::string& path, const std::string& tag) {
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir(tag);
+  opt.surface = true;
+  opt.until = Stage::Quad;
+  return run_pipeline(opt);
+}
+}  // namespace
+
 TEST_P(RealSurfaceQuads, ReachesAnExactSurfacePolycubeAndValidQuads) {
   const std::string path = shared_dir() + "/meshes/" + GetParam();
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_surface_quads");
-  opt.surface = true;
-  opt.until = Stage::Quad;
-  nlohmann::json j = run_pipeline(opt);
+  nlohmann::json j = surface_quads(path, "real_surface_quads");
   const auto& p = j["polycube"];
   EXPECT_EQ(j["mode"], "surface");
   // eight's surface deformation stalls at 1.12e-3 (the last schedule steps gain nothing); the
@@ -159,12 +166,7 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealSurfaceQuads, ::testing::Values("basi
 TEST(RealSurfaceQuadsCreases, CreasesOfTheJointAreCaptured) {
   const std::string path = shared_dir() + "/meshes/cad/joint.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_surface_creases");
-  opt.surface = true;
-  opt.until = Stage::Quad;
-  nlohmann::json j = run_pipeline(opt);
+  nlohmann::json j = surface_quads(path, "real_surface_creases");
   const auto& q = j["quad"];
   const auto& c = q["creases"];
   EXPECT_EQ(q["inverted"], 0);
