@@ -153,7 +153,7 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
   std::vector<std::vector<int>> chains;
   auto walk = [&](int start, int first_nb, int first_edge) {
     std::vector<int> c{start};
-    int prev = start, cur = first_nb, e = first_edge;
+    int cur = first_nb, e = first_edge;
     used[e] = 1;
     c.push_back(cur);
     while (inc[cur].size() == 2 && cur != start) {
@@ -162,12 +162,10 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
       const int next = e0 == e ? n1 : n0, ne = e0 == e ? e1 : e0;
       if (used[ne]) break;
       used[ne] = 1;
-      prev = cur;
       cur = next;
       e = ne;
       c.push_back(cur);
     }
-    (void)prev;
     chains.push_back(std::move(c));
   };
   for (int v = 0; v < s.V.rows(); ++v)
