@@ -5,6 +5,12 @@
 
 namespace polycube::geometry {
 
+double closest_point_on_segment(const Vec3& p, const Vec3& a, const Vec3& b) {
+  const Vec3 ab = b - a;
+  const double l2 = ab.squaredNorm();
+  return l2 > 0 ? std::clamp((p - a).dot(ab) / l2, 0.0, 1.0) : 0.0;
+}
+
 Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   // Voronoi regions of the triangle (Ericson, Real-Time Collision Detection, 5.1.5).
   const Vec3 ab = b - a, ac = c - a, ap = p - a;

@@ -10,6 +10,10 @@ namespace polycube::geometry {
 /// Closest point of triangle (a, b, c) to p, as barycentric coordinates (sum 1, all >= 0).
 Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
 
+/// Closest point of segment [a, b] to p, as the parameter t in [0, 1] of a + t (b - a) (0 for a
+/// zero-length segment).
+double closest_point_on_segment(const Vec3& p, const Vec3& a, const Vec3& b);
+
 struct ClosestHit {
   int face = -1;       ///< triangle id
   Vec3 bary = Vec3::Zero();   ///< barycentric coordinates of the closest point in that triangle

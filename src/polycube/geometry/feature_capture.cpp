@@ -8,6 +8,7 @@
 #include <unordered_map>
 
 #include "polycube/core/topology.h"
+#include "polycube/geometry/closest_point.h"
 #include "polycube/geometry/features.h"
 
 namespace polycube::geometry {
@@ -15,11 +16,9 @@ namespace polycube::geometry {
 namespace {
 
 double point_segment_distance(const Vec3& p, const Vec3& a, const Vec3& b, double* t_out = nullptr) {
-  const Vec3 ab = b - a;
-  const double l2 = ab.squaredNorm();
-  const double t = l2 > 0 ? std::clamp((p - a).dot(ab) / l2, 0.0, 1.0) : 0.0;
+  const double t = closest_point_on_segment(p, a, b);
   if (t_out) *t_out = t;
-  return (a + t * ab - p).norm();
+  return (a + t * (b - a) - p).norm();
 }
 
 // Uniform bucket grid of items with a bounding box (segments or points), cell size h.
@@ -180,32 +179,21 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
 
 std::vector<unsigned char> crease_edges(const SurfaceMesh& s, double weak_deg, double strong_deg) {
   const std::vector<unsigned char> weak = sharp_edges(s, weak_deg), strong = sharp_edges(s, strong_deg);
-  std::map<std::pair<int, int>, std::array<int, 2>> where;  // edge -> (face, k), strong flag
+  auto key = [](int a, int b) { return std::pair<int, int>(std::min(a, b), std::max(a, b)); };
+  std::set<std::pair<int, int>> strong_edges, keep;
   for (int f = 0; f < s.F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      const auto key = std::minmax(s.F(f, k), s.F(f, (k + 1) % 3));
-      auto& w = where[{key.first, key.second}];
-      w[1] |= strong[f] >> k & 1;
-    }
-  std::set<std::pair<int, int>> keep;
+    for (int k = 0; k < 3; ++k)
+      if (strong[f] >> k & 1) strong_edges.insert(key(s.F(f, k), s.F(f, (k + 1) % 3)));
   for (const std::vector<int>& c : sharp_chains(s, weak)) {
     bool any = false;
-    for (size_t i = 0; i + 1 < c.size() && !any; ++i) {
-      const auto key = std::minmax(c[i], c[i + 1]);
-      any = where[{key.first, key.second}][1] != 0;
-    }
+    for (size_t i = 0; i + 1 < c.size() && !any; ++i) any = strong_edges.count(key(c[i], c[i + 1])) > 0;
     if (any)
-      for (size_t i = 0; i + 1 < c.size(); ++i) {
-        const auto key = std::minmax(c[i], c[i + 1]);
-        keep.insert({key.first, key.second});
-      }
+      for (size_t i = 0; i + 1 < c.size(); ++i) keep.insert(key(c[i], c[i + 1]));
   }
   std::vector<unsigned char> out(s.F.rows(), 0);
   for (int f = 0; f < s.F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      const auto key = std::minmax(s.F(f, k), s.F(f, (k + 1) % 3));
-      if (keep.count({key.first, key.second})) out[f] |= 1 << k;
-    }
+    for (int k = 0; k < 3; ++k)
+      if (keep.count(key(s.F(f, k), s.F(f, (k + 1) % 3)))) out[f] |= 1 << k;
   return out;
 }
 

@@ -38,7 +38,7 @@ bool closest_on_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char
     for (int k = 0; k < 3; ++k) {
       if (!(sharp[f] >> k & 1)) continue;
       const Vec3 a = s.V.row(s.F(f, k)), b = s.V.row(s.F(f, (k + 1) % 3)), ab = b - a;
-      const double t = ab.squaredNorm() > 0 ? std::clamp((p - a).dot(ab) / ab.squaredNorm(), 0.0, 1.0) : 0.0;
+      const double t = closest_point_on_segment(p, a, b);
       const double d = (a + t * ab - p).norm();
       if (d <= best) {
         best = d;
