@@ -22,6 +22,13 @@ hex::HexResult grid_of_box(const SurfaceMesh& s) {
   o.smooth_iterations = 0;
   return hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
 }
+
+// The vertex of V at p (-1 if none).
+int vertex_at(const MatX3d& V, const Eigen::RowVector3d& p) {
+  for (int v = 0; v < V.rows(); ++v)
+    if ((V.row(v) - p).norm() < 1e-9) return v;
+  return -1;
+}
 }  // namespace
 
 TEST(Quad, ScaledJacobianKnownValues) {
@@ -77,9 +84,7 @@ TEST(Quad, FoldedQuadOnAFeatureIsUntangled) {
   // the smoothing unfolds them.
   const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
   hex::HexResult h = grid_of_box(s);
-  int moved = -1;
-  for (int v = 0; v < h.V.rows() && moved < 0; ++v)
-    if ((h.V.row(v) - Eigen::RowVector3d(0, 0, 1.5)).norm() < 1e-9) moved = v;
+  const int moved = vertex_at(h.V, Eigen::RowVector3d(0, 0, 1.5));
   ASSERT_GE(moved, 0);
   h.V(moved, 2) = 1.5 + 0.4;  // beyond its neighbour at z = 1.75, still on the edge x = y = 0
   const quad::QuadResult before = quad::quad_mesh_from_hexes(h.V, h.H, s, quad::QuadOptions{0});
@@ -182,9 +187,7 @@ TEST(Quad, FeatureVerticesSlideAlongTheirSharpEdge) {
   // vertices leaves 0.86). Sliding along the edge restores them; every vertex stays on the box.
   const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 1, 1));
   hex::HexResult h = grid_of_box(s);
-  int moved = -1;
-  for (int v = 0; v < h.V.rows() && moved < 0; ++v)
-    if ((h.V.row(v) - Eigen::RowVector3d(0, 0, 0.5)).norm() < 1e-9) moved = v;
+  const int moved = vertex_at(h.V, Eigen::RowVector3d(0, 0, 0.5));
   ASSERT_GE(moved, 0);
   h.V(moved, 2) = 0.5 + 0.22;  // its neighbour on the edge is at 0.75
   quad::QuadOptions fixed_opt;
