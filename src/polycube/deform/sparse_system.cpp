@@ -3,6 +3,7 @@
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <exception>
 #include <thread>
 
 #include "polycube/core/error.h"
@@ -34,6 +35,19 @@ SparseSystem::SparseSystem(int n, const std::vector<std::vector<int>>& elements)
   std::copy(inner.begin(), inner.end(), A_.innerIndexPtr());
   diag_.resize(3 * n);
   for (int c = 0; c < 3 * n; ++c) diag_[c] = outer[c + 1] - 1;
+  for (Slot& s : slots_) {
+    cholmod_start(&s.common);
+    s.common.print = 0;  // the library never prints
+  }
+}
+
+SparseSystem::~SparseSystem() {
+  for (Slot& s : slots_) {
+    cholmod_free_dense(&s.x, &s.common);
+    cholmod_free_dense(&s.y, &s.common);
+    cholmod_free_dense(&s.e, &s.common);
+    cholmod_finish(&s.common);
+  }
 }
 
 int SparseSystem::position(int vi, int vj, int a, int b) const {
@@ -105,25 +119,62 @@ double SparseSystem::mean_diagonal() const {
 }
 
 namespace {
+using SetThreads = void (*)(int);
+// OpenBLAS's thread count setter, if the BLAS is OpenBLAS (looked up at run time so that any
+// other BLAS works too).
+SetThreads openblas_threads() {
+  static const auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
+  return f;
+}
+int hardware_threads() { return static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency()))); }
+
 // OpenBLAS's worker threads spin (sched_yield) between the many small dense kernels of a supernodal
 // factorization; with more than two threads that costs more than it gains at our sizes (measured:
 // 2 threads 20% faster than 1 on an 8k-tet sphere). OpenMP (used by CHOLMOD) is kept at one
-// thread. Looked up at run time so that any other BLAS works too.
-void single_threaded_blas() {
+// thread.
+void factorization_blas_threads() {
+  if (auto f = openblas_threads()) f(hardware_threads());
   static bool done = false;
   if (done) return;
   done = true;
-  using SetThreads = void (*)(int);
-  if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"))) f(static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency()))));
   if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "omp_set_num_threads"))) f(1);
+}
+
+// Runs f(0) and f(1), on two threads when the machine has two cores, with a single-threaded BLAS
+// meanwhile (the triangular solves are memory bound: two of them side by side beat one on two
+// BLAS threads).
+template <class F>
+void run_pair(F&& f) {
+  if (hardware_threads() < 2) {
+    f(0);
+    f(1);
+    return;
+  }
+  if (auto set = openblas_threads()) set(1);
+  std::exception_ptr failure;
+  std::thread other([&] {
+    try {
+      f(1);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  });
+  try {
+    f(0);
+  } catch (...) {
+    other.join();
+    throw;
+  }
+  other.join();
+  if (failure) std::rethrow_exception(failure);
 }
 }  // namespace
 
 bool SparseSystem::factorize() {
-  single_threaded_blas();
+  factorization_blas_threads();
   std::copy(values_.begin(), values_.end(), A_.valuePtr());
   if (!analyzed_) {
-    llt_ = std::make_unique<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>>();
+    llt_ = std::make_unique<CholmodLLT>();
     llt_->setMode(Eigen::CholmodAuto);
     llt_->cholmod().print = 0;  // the library never prints
     llt_->analyzePattern(A_);
@@ -135,12 +186,26 @@ bool SparseSystem::factorize() {
 
 double SparseSystem::factor_to_cg_cost() const {
   if (!llt_) return 0;
-  auto& c = const_cast<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>&>(*llt_).cholmod();
+  const cholmod_common& c = llt_->cholmod();
   const double cg = 4.0 * c.lnz + 4.0 * static_cast<double>(values_.size());
   return cg > 0 ? c.fl / cg : 0;
 }
 
-Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b) const { return llt_->solve(b); }
+Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b, int slot) const {
+  POLYCUBE_ASSERT(llt_ && slot >= 0 && slot < kSlots, "solve without a factorization or with a bad slot");
+  Slot& s = slots_[slot];
+  cholmod_dense B{};
+  B.nrow = static_cast<size_t>(b.size());
+  B.ncol = 1;
+  B.nzmax = B.nrow;
+  B.d = B.nrow;
+  B.x = const_cast<double*>(b.data());
+  B.xtype = CHOLMOD_REAL;
+  B.dtype = CHOLMOD_DOUBLE;
+  const int ok = cholmod_solve2(CHOLMOD_A, llt_->factor(), &B, nullptr, &s.x, nullptr, &s.y, &s.e, &s.common);
+  POLYCUBE_ASSERT(ok && s.x, "CHOLMOD solve failed");
+  return Eigen::Map<const Eigen::VectorXd>(static_cast<const double*>(s.x->x), b.size());
+}
 
 Eigen::VectorXd SparseSystem::multiply(const Eigen::VectorXd& x) const {
   Eigen::VectorXd y = Eigen::VectorXd::Zero(x.size());
@@ -160,12 +225,13 @@ Eigen::VectorXd SparseSystem::multiply(const Eigen::VectorXd& x) const {
   return y;
 }
 
-int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter) const {
-  x = solve(b);
+int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter,
+                            int slot) const {
+  x = solve(b, slot);
   Eigen::VectorXd r = b - multiply(x);
   const double bn = b.norm();
   if (bn == 0 || r.norm() <= tol * bn) return 1;
-  Eigen::VectorXd z = solve(r), p = z;
+  Eigen::VectorXd z = solve(r, slot), p = z;
   double rz = r.dot(z);
   for (int it = 1; it <= max_iter; ++it) {
     const Eigen::VectorXd Ap = multiply(p);
@@ -175,12 +241,25 @@ int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double
     x += a * p;
     r -= a * Ap;
     if (r.norm() <= tol * bn) return it + 1;
-    z = solve(r);
+    z = solve(r, slot);
     const double rz_new = r.dot(z);
     p = z + (rz_new / rz) * p;
     rz = rz_new;
   }
   return -1;
+}
+
+std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0,
+                                                const Eigen::VectorXd& b1, Eigen::VectorXd& x1, double tol,
+                                                int max_iter) const {
+  std::array<int, 2> its{};
+  run_pair([&](int k) { its[k] = solve_pcg(k == 0 ? b0 : b1, k == 0 ? x0 : x1, tol, max_iter, k); });
+  return its;
+}
+
+void SparseSystem::solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
+                              Eigen::VectorXd& x1) const {
+  run_pair([&](int k) { (k == 0 ? x0 : x1) = solve(k == 0 ? b0 : b1, k); });
 }
 
 }  // namespace polycube::deform

@@ -13,10 +13,21 @@
 
 namespace polycube::deform {
 
+/// Eigen's CHOLMOD wrapper with its factor exposed, for solves from several threads.
+class CholmodLLT : public Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper> {
+ public:
+  cholmod_factor* factor() const { return m_cholmodFactor; }
+};
+
 class SparseSystem : public HessianSink {
  public:
+  /// Solves may run concurrently in this many slots (threads), one slot per thread.
+  static constexpr int kSlots = 2;
   /// Pattern over `nvertices` vertices (3 DOF each) from element vertex lists.
   SparseSystem(int nvertices, const std::vector<std::vector<int>>& elements);
+  ~SparseSystem() override;
+  SparseSystem(const SparseSystem&) = delete;
+  SparseSystem& operator=(const SparseSystem&) = delete;
 
   void set_zero() { std::fill(values_.begin(), values_.end(), 0.0); }
   /// Current values (upper triangle, CSC order); copy/restore for a constant part.
@@ -35,13 +46,23 @@ class SparseSystem : public HessianSink {
   /// timings): floating-point operations of a factorization over those of one preconditioned CG
   /// iteration (two triangular solves with the factor and one product with the matrix).
   double factor_to_cg_cost() const;
-  Eigen::VectorXd solve(const Eigen::VectorXd& b) const;
+  /// x = A^-1 b with the last factorization. Calls with different `slot`s may run concurrently.
+  Eigen::VectorXd solve(const Eigen::VectorXd& b, int slot = 0) const;
   /// y = A x with the current values (the factorization may be of older ones).
   Eigen::VectorXd multiply(const Eigen::VectorXd& x) const;
   /// Solves A x = b with the current values by conjugate gradients preconditioned with the last
   /// factorization (exact in one step when it is of the current values). Returns the iterations
-  /// used, or -1 if the relative residual did not fall below `tol` within `max_iter`.
-  int solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter) const;
+  /// used, or -1 if the relative residual did not fall below `tol` within `max_iter`. (Starting
+  /// from the previous iteration's solution was tried: its stale smooth components pass the
+  /// residual test, and the SQP stalled on a sphere.)
+  int solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter, int slot = 0) const;
+  /// Two independent solve_pcg calls (slots 0 and 1), run on two threads when the machine has
+  /// them (BLAS single-threaded meanwhile). Returns both results.
+  std::array<int, 2> solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
+                                    Eigen::VectorXd& x1, double tol, int max_iter) const;
+  /// x0 = A^-1 b0 and x1 = A^-1 b1 with the last factorization, on two threads when available.
+  void solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
+                  Eigen::VectorXd& x1) const;
   int dofs() const { return 3 * n_; }
 
  private:
@@ -54,7 +75,15 @@ class SparseSystem : public HessianSink {
   // Cache: for a sorted 4-vertex key, offset into cache_pos_ of its 4x4x3 column-start positions.
   std::vector<std::pair<std::array<int, 4>, int>> cache_keys_;
   std::vector<int> cache_pos_;
-  std::unique_ptr<Eigen::CholmodDecomposition<Eigen::SparseMatrix<double>, Eigen::Upper>> llt_;
+  std::unique_ptr<CholmodLLT> llt_;
+  // Per slot: CHOLMOD's common (workspace, status) and the solve's reused result and workspaces.
+  struct Slot {
+    cholmod_common common;
+    cholmod_dense* x = nullptr;
+    cholmod_dense* y = nullptr;
+    cholmod_dense* e = nullptr;
+  };
+  mutable std::array<Slot, kSlots> slots_;
   bool analyzed_ = false;
 };
 
