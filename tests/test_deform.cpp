@@ -3,6 +3,7 @@
 
 #include "polycube/chart/labeling.h"
 #include "polycube/deform/solver.h"
+#include "polycube/deform/sparse_system.h"
 #include "polycube/examples/examples.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "test_util.h"
@@ -82,4 +83,46 @@ TEST(Deform, BestRotationAlignsARotatedBox) {
   double l1, a;
   deform::l1_measure(W, b.F, l1, a);
   EXPECT_LT(l1 / a - 1, 1e-4);  // from 0.2 before the rotation
+}
+
+// The SQP system: solves on two threads (each with its own CHOLMOD workspace) give what one
+// thread gives, and CG preconditioned by an older factorization reaches its tolerance.
+TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
+  auto s = sphere(2);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  const int n = static_cast<int>(tm.V.rows());
+  std::vector<std::vector<int>> elements;
+  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
+  deform::SparseSystem sys(n, elements);
+  sys.cache_elements(elements);
+  const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
+  // ARAP's Gauss-Newton Hessian plus a volume barrier (couples the coordinates), made definite.
+  deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, &sys);
+  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, &sys);
+  sys.add_diagonal(1e-6);
+  ASSERT_TRUE(sys.factorize());
+  std::mt19937 rng(7);
+  std::normal_distribution<double> N01;
+  Eigen::VectorXd b0(3 * n), b1(3 * n);
+  for (int i = 0; i < 3 * n; ++i) {
+    b0[i] = N01(rng);
+    b1[i] = N01(rng);
+  }
+  Eigen::VectorXd x0, x1;
+  sys.solve_pair(b0, x0, b1, x1);
+  const Eigen::VectorXd y0 = sys.solve(b0), y1 = sys.solve(b1);
+  EXPECT_LE((x0 - y0).norm(), 1e-12 * y0.norm());
+  EXPECT_LE((x1 - y1).norm(), 1e-12 * y1.norm());
+  EXPECT_LE((sys.multiply(x0) - b0).norm(), 1e-8 * b0.norm());
+
+  // New values (a stronger barrier), the old factorization as preconditioner.
+  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.5, nullptr, &sys);
+  const auto its = sys.solve_pcg_pair(b0, x0, b1, x1, 1e-6, 200);
+  EXPECT_GT(its[0], 1);  // the factorization is not of these values: CG has work to do
+  EXPECT_GT(its[1], 1);
+  EXPECT_LE((sys.multiply(x0) - b0).norm(), 1e-6 * b0.norm());
+  EXPECT_LE((sys.multiply(x1) - b1).norm(), 1e-6 * b1.norm());
+  Eigen::VectorXd z0;
+  EXPECT_EQ(sys.solve_pcg(b0, z0, 1e-6, 200), its[0]);
+  EXPECT_LE((z0 - x0).norm(), 1e-12 * x0.norm());
 }

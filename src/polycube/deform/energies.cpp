@@ -171,7 +171,7 @@ double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Ei
       } else {
         H += H2;
       }
-      hess->add(v, 3, weight * H);
+      hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * H));
     }
   }
   return weight * E;
@@ -228,7 +228,7 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
         Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
         for (int p = 0; p < 4; ++p)
           for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
-        hess->add(v, 4, weight * rest.w[t] * H);
+        hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * rest.w[t] * H));
       }
     }
     return E;
@@ -314,7 +314,7 @@ double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
       for (int p = 0; p < 3; ++p)
         for (int q = 0; q < 3; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
       const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
-      hess->add(v, 3, weight * rest.w[f] * H);
+      hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * rest.w[f] * H));
     }
   }
   return weight * E;
@@ -364,7 +364,7 @@ double border_l1_energy(const MatX3d& X, const std::vector<std::array<int, 2>>& 
       Eigen::Matrix<double, 6, 6> H;
       H << Hg, -Hg, -Hg, Hg;
       const int v[2] = {ab[0], ab[1]};
-      hess->add(v, 2, c * H);
+      hess->add(v, 2, Eigen::Matrix<double, 6, 6>(c * H));
     }
   }
   return weight * h * E;
@@ -399,7 +399,7 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     Eigen::Matrix<double, 12, 1> dJ;
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * rest.w[t] / J * dJ));
-    if (hess) hess->add(v, 4, weight * rest.w[t] / (J * J) * dJ * dJ.transpose());
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * rest.w[t] / (J * J) * dJ * dJ.transpose()));
   }
   return weight * E;
 }
@@ -474,7 +474,7 @@ double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePa
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 1, 12> dD = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight / D * dD.transpose()));
-    if (hess) hess->add(v, 4, weight / (D * D) * dD.transpose() * dD);
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight / (D * D) * dD.transpose() * dD));
   }
   return weight * E;
 }
@@ -504,7 +504,7 @@ double complexity_energy(const MatX3d& X, const MatX3i& F, const std::vector<Fac
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 3, 12> Jr = pn.Jf - pn.Jg;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(2 * weight * Ae * Jr.transpose() * r));
-    if (hess) hess->add(v, 4, 2 * weight * Ae * Jr.transpose() * Jr);
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(2 * weight * Ae * Jr.transpose() * Jr));
   }
   return weight * E;
 }
@@ -521,7 +521,7 @@ double edge_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 1, 12> dr = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(2 * weight * e.omega * r * dr.transpose()));
-    if (hess) hess->add(v, 4, 2 * weight * e.omega * dr.transpose() * dr);
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(2 * weight * e.omega * dr.transpose() * dr));
   }
   return weight * E;
 }

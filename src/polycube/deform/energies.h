@@ -14,6 +14,8 @@
 namespace polycube::deform {
 
 /// Receives symmetric element Hessians: `H` is (3 nv) x (3 nv) over the vertices v[0..nv).
+/// Receives element Hessians (3nv x 3nv, vertex-major). Callers pass fixed-size matrices, which
+/// bind to the Ref without a heap temporary (an expression would allocate one per element).
 class HessianSink {
  public:
   virtual ~HessianSink() = default;
