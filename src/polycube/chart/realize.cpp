@@ -601,6 +601,50 @@ void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult&
   r.misoriented_faces = count_misoriented(r.X, B, labels, diag);
 }
 
+namespace {
+double signed_volume(const MatX3d& X, int a, int b, int c, int d) {
+  const Vec3 xa = X.row(a);
+  return (Vec3(X.row(b)) - xa).dot((Vec3(X.row(c)) - xa).cross(Vec3(X.row(d)) - xa));
+}
+
+// Vertices made by splitting an interior edge (or face) whose ends lie on one plane sit on the
+// chord between plane vertices, i.e. nearly on the plane in the deformed mesh: the tets between
+// the chord and the surface are nearly flat, and the first step towards the planes inverts them
+// (spot and tet/hand stalled at t = 0). Each such vertex moves inward (against its planes' label
+// directions) by the fraction of `len[i]` among 0, 1/32 .. 1/2 that gives its tets the largest
+// smallest volume ratio (deformed over rest).
+void open_split_vertices(const MatX3d& rest, MatX3d& def, const MatX4i& T, int first,
+                         const std::vector<Vec3>& inward, const std::vector<double>& len) {
+  std::vector<std::vector<int>> tets(inward.size());
+  for (int t = 0; t < T.rows(); ++t)
+    for (int j = 0; j < 4; ++j)
+      if (T(t, j) >= first) tets[T(t, j) - first].push_back(t);
+  for (size_t i = 0; i < inward.size(); ++i) {
+    if (inward[i].squaredNorm() == 0) continue;
+    const int m = first + static_cast<int>(i);
+    const Eigen::RowVector3d start = def.row(m), dir = inward[i].normalized().transpose();
+    auto worst = [&] {
+      double w = std::numeric_limits<double>::infinity();
+      for (int t : tets[i]) {
+        const double r = signed_volume(rest, T(t, 0), T(t, 1), T(t, 2), T(t, 3));
+        w = std::min(w, signed_volume(def, T(t, 0), T(t, 1), T(t, 2), T(t, 3)) / r);
+      }
+      return w;
+    };
+    double best = worst(), best_f = 0;
+    for (double f = 1.0 / 32; f <= 0.5; f *= 2) {
+      def.row(m) = start + f * len[i] * dir;
+      const double w = worst();
+      if (w > best) {
+        best = w;
+        best_f = f;
+      }
+    }
+    def.row(m) = start + best_f * len[i] * dir;
+  }
+}
+}  // namespace
+
 RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
                                const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
   if (T_in.rows() == 0) return realize_surface_polycube(rest_in, B, deformed, labels, opt, hooks);
@@ -706,10 +750,23 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     const int nn = n + static_cast<int>(made.size());
     rest.conservativeResize(nn, 3);
     def.conservativeResize(nn, 3);
+    std::vector<Vec3> inward(made.size(), Vec3::Zero());
+    std::vector<double> len(made.size(), 0.0);
     for (size_t i = 0; i < made.size(); ++i) {
-      rest.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (rest.row(made[i].first) + rest.row(made[i].second));
-      def.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (def.row(made[i].first) + def.row(made[i].second));
+      const auto [u, v] = made[i];
+      rest.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (rest.row(u) + rest.row(v));
+      def.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (def.row(u) + def.row(v));
+      len[i] = (def.row(u) - def.row(v)).norm();
+      if (u >= static_cast<int>(vcharts.size()) || v >= static_cast<int>(vcharts.size())) continue;
+      for (int k = 0; k < 3; ++k)
+        if (planes.of_vertex[k][u] >= 0 && planes.of_vertex[k][u] == planes.of_vertex[k][v])
+          for (int c : vcharts[u])
+            if (charts.label[c] / 2 == k) {
+              inward[i] -= label_direction(charts.label[c]);
+              break;
+            }
     }
+    open_split_vertices(rest, def, T, n, inward, len);
     for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
     n = nn;
     r.split_edges = static_cast<int>(made.size());
@@ -734,12 +791,28 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       }
     std::vector<char> used(T.rows(), 0);
     std::vector<std::array<int, 4>> added;
-    std::vector<Vec3> new_rest, new_def;
+    std::vector<Vec3> new_rest, new_def, face_inward;
+    std::vector<double> face_len;
     for (const auto& [f, tets] : faces) {
       if (tets.size() != 2 || used[tets[0]] || used[tets[1]]) continue;  // boundary face, or done
       const int m = n + static_cast<int>(new_rest.size());
       new_rest.push_back((rest.row(f[0]) + rest.row(f[1]) + rest.row(f[2])).transpose() / 3);
       new_def.push_back((def.row(f[0]) + def.row(f[1]) + def.row(f[2])).transpose() / 3);
+      Vec3 in = Vec3::Zero();
+      for (int k = 0; k < 3; ++k) {
+        const int pl = planes.of_vertex[k][f[0]];
+        if (pl < 0 || planes.of_vertex[k][f[1]] != pl || planes.of_vertex[k][f[2]] != pl ||
+            f[0] >= static_cast<int>(vcharts.size()))
+          continue;
+        for (int c : vcharts[f[0]])
+          if (charts.label[c] / 2 == k) {
+            in -= label_direction(charts.label[c]);
+            break;
+          }
+      }
+      face_inward.push_back(in);
+      face_len.push_back(((def.row(f[0]) - def.row(f[1])).norm() + (def.row(f[1]) - def.row(f[2])).norm() +
+                          (def.row(f[2]) - def.row(f[0])).norm()) / 3);
       for (int t : tets) {
         used[t] = 1;
         const std::array<int, 4> orig{T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
@@ -772,6 +845,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         def.row(n + static_cast<Eigen::Index>(i)) = new_def[i].transpose();
       }
       for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
+      open_split_vertices(rest, def, T, n, face_inward, face_len);
       n = nn;
     }
   }
