@@ -293,3 +293,29 @@ TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {
   EXPECT_EQ(chart::relabel_collapsed(rest, rest, F, l), 0);
   EXPECT_EQ(l, labels);
 }
+
+TEST(Realize, AutoKeepsTheBetterOfTheTwoStartsRunSideBySide) {
+  // "auto" runs the continuation and Eq. 17 starts on two threads; the result must be the one
+  // each start gives alone, the lower ARAP distortion winning.
+  auto s = sphere(3, Vec3(0, 0, 0), 1.0);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 4000);
+  auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  chart::ExtractOptions opt;
+  double arap[2];
+  MatX3d X[2];
+  const char* names[2] = {"continuation", "eq17"};
+  for (int i = 0; i < 2; ++i) {
+    opt.realize.start = names[i];
+    const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+    expect_exact_polycube(e, tm);
+    arap[i] = e.realized.arap;
+    X[i] = e.realized.X;
+  }
+  opt.realize.start = "auto";
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  expect_exact_polycube(e, tm);
+  const int best = arap[1] < arap[0] ? 1 : 0;
+  EXPECT_EQ(e.realized.start, names[best]);
+  EXPECT_NEAR(e.realized.arap, arap[best], 1e-9 * arap[best]);
+  EXPECT_LE((e.realized.X - X[best]).cwiseAbs().maxCoeff(), 1e-6);
+}

@@ -13,6 +13,7 @@
 
 #include "polycube/chart/labeling.h"
 #include "polycube/core/lbfgs.h"
+#include "polycube/core/parallel.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
 #include "polycube/tetra/tetrahedralize.h"
@@ -862,9 +863,6 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (opt.start == "continuation" || opt.start == "auto") starts.push_back("continuation");
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
   if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto)");
-  bool have = false;
-  int have_flipped = 0;
-  std::string last_failure, failures;
   const double diag0 = (def.colwise().maxCoeff() - def.colwise().minCoeff()).norm();
   // Boundary triangles not facing their label's direction (or of zero area) in X.
   auto misoriented = [&](const MatX3d& X) {
@@ -875,33 +873,40 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     }
     return count;
   };
-  for (const auto& name : starts) {
-    if (!last_failure.empty()) failures += (failures.empty() ? "" : "; ") + last_failure;
-    last_failure.clear();
+  // One start, through to the ARAP minimum: a candidate, or the reason it failed.
+  struct Attempt {
+    bool ok = false;
+    MatX3d X;
+    double arap = 0;
+    int flipped = 0, ut = 0, it = 0;
+    std::string failure;
+  };
+  auto attempt = [&](const std::string& name, Realizer& solver, const Hooks& log) {
+    Attempt a;
     MatX3d X = def;
     int ut = 0;
     if (name == "eq17") {
       if (!relax_eq17(B, T, planes, X)) {
-        last_failure = "the relaxation of Eq. 17 failed";
-        continue;
+        a.failure = "the relaxation of Eq. 17 failed";
+        return a;
       }
       int inverted = 0;
       ut = solver.untangle(X, inverted);
       if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
       if (inverted > 0) {
-        hooks.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
-                    std::to_string(ut) + " untangling steps");
-        last_failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
-                       " untangling steps from the relaxation of Eq. 17";
-        continue;
+        log.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
+                  std::to_string(ut) + " untangling steps");
+        a.failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
+                    " untangling steps from the relaxation of Eq. 17";
+        return a;
       }
       solver.set_barrier_weight(opt.barrier_weight);
       solver.set_barrier_scale(X);
     } else {
       const int inv = count_inverted(X, T, solver.arap_rest());
       if (inv > 0) {
-        last_failure = "the deformed mesh has " + std::to_string(inv) + " inverted tets";
-        continue;
+        a.failure = "the deformed mesh has " + std::to_string(inv) + " inverted tets";
+        return a;
       }
       solver.set_barrier_scale(X);
       // Where the continuation stalls on nearly flat tets, a stronger barrier keeps them open:
@@ -913,44 +918,80 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         int steps = 0;
         landed = solver.continuation(X, steps);
         ut += steps;
-        if (!landed) hooks.debug("continuation stalled with barrier weight " + std::to_string(f * opt.barrier_weight) +
-                                 ": " + solver.blocked());
+        if (!landed)
+          log.debug("continuation stalled with barrier weight " + std::to_string(f * opt.barrier_weight) + ": " +
+                    solver.blocked());
       }
       if (!landed) {
         solver.land(X);
         int inverted = 0;
         int u2 = solver.untangle(X, inverted);
         if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted);
-        hooks.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
-                    std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
+        log.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
+                  std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
         ut += u2;
         if (inverted > 0) {
-          last_failure = "moving the deformed mesh onto the planes: " + solver.blocked() + "; " +
-                         std::to_string(inverted) + " tets remain inverted after landing and untangling";
-          continue;
+          a.failure = "moving the deformed mesh onto the planes: " + solver.blocked() + "; " +
+                      std::to_string(inverted) + " tets remain inverted after landing and untangling";
+          return a;
         }
       }
     }
-    const int it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
-    const double arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
-    const int flipped = misoriented(X);
-    hooks.debug("realization from the " + name + " start: ARAP " + std::to_string(arap) + " after " +
-                std::to_string(ut) + " untangling/continuation steps and " + std::to_string(it) +
-                " ARAP iterations, " + std::to_string(flipped) + " misoriented boundary triangles, " +
-                std::to_string(sw.seconds()) + " s");
+    a.it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
+    a.arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
+    a.flipped = misoriented(X);
+    a.ut = ut;
+    log.debug("realization from the " + name + " start: ARAP " + std::to_string(a.arap) + " after " +
+              std::to_string(ut) + " untangling/continuation steps and " + std::to_string(a.it) +
+              " ARAP iterations, " + std::to_string(a.flipped) + " misoriented boundary triangles, " +
+              std::to_string(sw.seconds()) + " s");
+    if (a.flipped > 0)
+      a.failure = std::to_string(a.flipped) + " boundary triangles do not face their chart's direction";
+    a.ok = true;
+    a.X = std::move(X);
+    return a;
+  };
+  std::vector<Attempt> attempts(starts.size());
+  if (starts.size() == 2) {
+    // The two starts are independent: side by side, the second with its own solver and its
+    // messages held back until the first is done, so that the log reads as if they ran in turn.
+    std::vector<std::pair<LogLevel, std::string>> held;
+    Hooks second;
+    second.log = [&held](LogLevel l, const std::string& m) { held.emplace_back(l, m); };
+    run_pair([&](int k) {
+      if (k == 0) {
+        attempts[0] = attempt(starts[0], solver, hooks);
+      } else {
+        Realizer other(rest, T, planes, opt, second);
+        if (other.ok())
+          attempts[1] = attempt(starts[1], other, second);
+        else
+          attempts[1].failure = "the ARAP system of the realization is not positive definite";
+      }
+    });
+    for (const auto& [level, m] : held)
+      if (hooks.log) hooks.log(level, m);
+  } else {
+    attempts[0] = attempt(starts[0], solver, hooks);
+  }
+  bool have = false;
+  int have_flipped = 0;
+  std::string failures;
+  for (size_t i = 0; i < starts.size(); ++i) {
+    Attempt& a = attempts[i];
+    if (!a.failure.empty()) failures += (failures.empty() ? "" : "; ") + a.failure;
+    if (!a.ok) continue;
     // A valid candidate (every boundary triangle facing its label) beats any invalid one.
-    if (flipped > 0) last_failure = std::to_string(flipped) + " boundary triangles do not face their chart's direction";
-    if (!have || (flipped == 0 && have_flipped > 0) || ((flipped == 0) == (have_flipped == 0) && arap < r.arap)) {
+    if (!have || (a.flipped == 0 && have_flipped > 0) || ((a.flipped == 0) == (have_flipped == 0) && a.arap < r.arap)) {
       have = true;
-      have_flipped = flipped;
-      r.X = std::move(X);
-      r.arap = arap;
-      r.start = name;
-      r.untangle_iterations = ut;
-      r.iterations = it;
+      have_flipped = a.flipped;
+      r.X = std::move(a.X);
+      r.arap = a.arap;
+      r.start = starts[i];
+      r.untangle_iterations = a.ut;
+      r.iterations = a.it;
     }
   }
-  if (!last_failure.empty()) failures += (failures.empty() ? "" : "; ") + last_failure;
   if (!have) return fail(failures);
   hooks.report("polycube", 0.95);
 

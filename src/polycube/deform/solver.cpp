@@ -6,9 +6,9 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
-#include <thread>
 
 #include "polycube/core/error.h"
+#include "polycube/core/parallel.h"
 #include "polycube/deform/sparse_system.h"
 #include "polycube/validate/tetmesh.h"
 
@@ -113,15 +113,13 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
     arap = p.distortion(X, g ? &ga : nullptr, with_arap_hessian ? H : nullptr);
   };
   Energies e;
-  if (!with_arap_hessian && p.T.rows() >= 4000 && std::thread::hardware_concurrency() >= 2) {
-    std::thread worker(distortion);
-    try {
-      e = evaluate_without_arap(p, X, alpha, eps, g, H);
-    } catch (...) {
-      worker.join();
-      throw;
-    }
-    worker.join();
+  if (!with_arap_hessian && p.T.rows() >= 4000) {
+    run_pair([&](int k) {
+      if (k == 0)
+        e = evaluate_without_arap(p, X, alpha, eps, g, H);
+      else
+        distortion();
+    });
   } else {
     e = evaluate_without_arap(p, X, alpha, eps, g, H);
     if (std::isfinite(e.total)) distortion();

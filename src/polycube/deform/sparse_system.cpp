@@ -3,10 +3,9 @@
 #include <dlfcn.h>
 
 #include <algorithm>
-#include <exception>
-#include <thread>
 
 #include "polycube/core/error.h"
+#include "polycube/core/parallel.h"
 
 namespace polycube::deform {
 
@@ -119,54 +118,17 @@ double SparseSystem::mean_diagonal() const {
 }
 
 namespace {
-using SetThreads = void (*)(int);
-// OpenBLAS's thread count setter, if the BLAS is OpenBLAS (looked up at run time so that any
-// other BLAS works too).
-SetThreads openblas_threads() {
-  static const auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
-  return f;
-}
-int hardware_threads() { return static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency()))); }
-
 // OpenBLAS's worker threads spin (sched_yield) between the many small dense kernels of a supernodal
 // factorization; with more than two threads that costs more than it gains at our sizes (measured:
 // 2 threads 20% faster than 1 on an 8k-tet sphere). OpenMP (used by CHOLMOD) is kept at one
 // thread.
 void factorization_blas_threads() {
-  if (auto f = openblas_threads()) f(hardware_threads());
+  set_blas_threads(hardware_threads());
   static bool done = false;
   if (done) return;
   done = true;
+  using SetThreads = void (*)(int);
   if (auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "omp_set_num_threads"))) f(1);
-}
-
-// Runs f(0) and f(1), on two threads when the machine has two cores, with a single-threaded BLAS
-// meanwhile (the triangular solves are memory bound: two of them side by side beat one on two
-// BLAS threads).
-template <class F>
-void run_pair(F&& f) {
-  if (hardware_threads() < 2) {
-    f(0);
-    f(1);
-    return;
-  }
-  if (auto set = openblas_threads()) set(1);
-  std::exception_ptr failure;
-  std::thread other([&] {
-    try {
-      f(1);
-    } catch (...) {
-      failure = std::current_exception();
-    }
-  });
-  try {
-    f(0);
-  } catch (...) {
-    other.join();
-    throw;
-  }
-  other.join();
-  if (failure) std::rethrow_exception(failure);
 }
 }  // namespace
 
