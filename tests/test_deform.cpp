@@ -129,3 +129,16 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
   EXPECT_LE((sys.multiply(z0) - b0).norm(), 1e-6 * b0.norm());
   EXPECT_LE((z0 - x0).norm(), 1e-4 * x0.norm());
 }
+
+TEST(Deform, TwoRunsGiveTheSameResultBitForBit) {
+  // Reproducibility with the threads of the solver (solves side by side, ARAP gradient on its own
+  // thread above 4000 tets): nothing may depend on which thread finishes first.
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 5000);
+  ASSERT_GE(tm.T.rows(), 4000);
+  const auto a = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  const auto b = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  EXPECT_EQ(a.iterations, b.iterations);
+  EXPECT_EQ(a.factorizations, b.factorizations);
+  EXPECT_EQ((a.X - b.X).cwiseAbs().maxCoeff(), 0.0);
+}
