@@ -103,9 +103,10 @@ Energies evaluate_without_arap(const Problem& p, const MatX3d& X, double alpha, 
 
 Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, Eigen::VectorXd* g, HessianSink* H,
                   bool with_arap_hessian) {
-  // The distortion goes into its own gradient, on a second thread for large tet meshes (a
-  // rotation per tet) while this one does the other terms; the same arithmetic either way, so
-  // results do not depend on the core count. Measured: fandisk, 49k tets, assembly 7.1 -> 5.7 s.
+  // The distortion goes into its own gradient, on a second thread for large meshes (a rotation
+  // per tet, or per triangle in surface mode) while this one does the other terms; the same
+  // arithmetic either way, so results do not depend on the core count. Measured: fandisk, 49k
+  // tets, assembly 7.1 -> 5.7 s.
   Eigen::VectorXd ga;
   double arap = 0;
   auto distortion = [&] {
@@ -113,7 +114,7 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
     arap = p.distortion(X, g ? &ga : nullptr, with_arap_hessian ? H : nullptr);
   };
   Energies e;
-  if (!with_arap_hessian && p.T.rows() >= 4000) {
+  if (!with_arap_hessian && (p.surface ? p.B.rows() / 2 : p.T.rows()) >= 4000) {
     run_pair([&](int k) {
       if (k == 0)
         e = evaluate_without_arap(p, X, alpha, eps, g, H);
