@@ -17,6 +17,7 @@
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
 #include "polycube/tetra/tetrahedralize.h"
+#include "polycube/validate/tetmesh.h"
 
 namespace polycube::chart {
 
@@ -604,8 +605,7 @@ void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult&
 
 namespace {
 double signed_volume(const MatX3d& X, int a, int b, int c, int d) {
-  const Vec3 xa = X.row(a);
-  return (Vec3(X.row(b)) - xa).dot((Vec3(X.row(c)) - xa).cross(Vec3(X.row(d)) - xa));
+  return tet_volume(X.row(a), X.row(b), X.row(c), X.row(d));
 }
 
 // Vertices made by splitting an interior edge (or face) whose ends lie on one plane sit on the
