@@ -9,6 +9,7 @@
 #include <map>
 #include <memory>
 #include <array>
+#include <initializer_list>
 #include <numeric>
 
 #include "polycube/chart/labeling.h"
@@ -734,6 +735,24 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     if (planes.count[k] < 2) return fail(std::string("fewer than two planes normal to ") + "XYZ"[k]);
   }
 
+  // Inward direction at a vertex made between input vertices `vs`: against the label of every plane
+  // they all lie on (zero if none).
+  auto inward_of = [&](std::initializer_list<int> vs) {
+    Vec3 in = Vec3::Zero();
+    const int v0 = *vs.begin();
+    for (int k = 0; k < 3; ++k) {
+      const int pl = planes.of_vertex[k][v0];
+      bool shared = pl >= 0;
+      for (int v : vs) shared = shared && v < static_cast<int>(vcharts.size()) && planes.of_vertex[k][v] == pl;
+      if (!shared) continue;
+      for (int c : vcharts[v0])
+        if (charts.label[c] / 2 == k) {
+          in -= label_direction(charts.label[c]);
+          break;
+        }
+    }
+    return in;
+  };
   // ---- split interior edges whose ends lie on one plane ----
   MatX3d rest = rest_in, def = deformed;
   MatX4i T = T_in;
@@ -758,14 +777,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       rest.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (rest.row(u) + rest.row(v));
       def.row(n + static_cast<Eigen::Index>(i)) = 0.5 * (def.row(u) + def.row(v));
       len[i] = (def.row(u) - def.row(v)).norm();
-      if (u >= static_cast<int>(vcharts.size()) || v >= static_cast<int>(vcharts.size())) continue;
-      for (int k = 0; k < 3; ++k)
-        if (planes.of_vertex[k][u] >= 0 && planes.of_vertex[k][u] == planes.of_vertex[k][v])
-          for (int c : vcharts[u])
-            if (charts.label[c] / 2 == k) {
-              inward[i] -= label_direction(charts.label[c]);
-              break;
-            }
+      inward[i] = inward_of({u, v});
     }
     open_split_vertices(rest, def, T, n, inward, len);
     for (int k = 0; k < 3; ++k) planes.of_vertex[k].resize(nn, -1);
@@ -799,19 +811,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       const int m = n + static_cast<int>(new_rest.size());
       new_rest.push_back((rest.row(f[0]) + rest.row(f[1]) + rest.row(f[2])).transpose() / 3);
       new_def.push_back((def.row(f[0]) + def.row(f[1]) + def.row(f[2])).transpose() / 3);
-      Vec3 in = Vec3::Zero();
-      for (int k = 0; k < 3; ++k) {
-        const int pl = planes.of_vertex[k][f[0]];
-        if (pl < 0 || planes.of_vertex[k][f[1]] != pl || planes.of_vertex[k][f[2]] != pl ||
-            f[0] >= static_cast<int>(vcharts.size()))
-          continue;
-        for (int c : vcharts[f[0]])
-          if (charts.label[c] / 2 == k) {
-            in -= label_direction(charts.label[c]);
-            break;
-          }
-      }
-      face_inward.push_back(in);
+      face_inward.push_back(inward_of({f[0], f[1], f[2]}));
       face_len.push_back(((def.row(f[0]) - def.row(f[1])).norm() + (def.row(f[1]) - def.row(f[2])).norm() +
                           (def.row(f[2]) - def.row(f[0])).norm()) / 3);
       for (int t : tets) {
