@@ -251,7 +251,6 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
   double q = quality(X, l1, p.area0);
-  Eigen::VectorXd Hg, Hc;  // H^-1 g and H^-1 grad C
   for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
     const double d0 = q;
@@ -280,6 +279,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       Stopwatch sw_fac;
       // The Hessian changes slowly within a schedule step: reuse the last factorization as a
       // preconditioner for conjugate gradients, and factorize anew only when that gets slow.
+      Eigen::VectorXd Hg, Hc;  // H^-1 g and H^-1 grad C
       bool solved = false;
       if (factor_valid) {
         sys.values() = assembled;
