@@ -112,6 +112,7 @@ TEST(Hex, HausdorffKnownDistances) {
   EXPECT_NEAR(h.a_to_b, 0.5, 1e-12);
   EXPECT_NEAR(h.b_to_a, 0.0, 1e-12);
   EXPECT_NEAR(h.max, 0.5, 1e-12);
+  EXPECT_NEAR(h.a_to_b_at.x(), 1.0, 1e-12);  // reached on the far edge x = 1
 }
 
 TEST(Hex, TetLocatorFindsTheContainingTet) {

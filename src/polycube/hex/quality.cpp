@@ -143,21 +143,32 @@ std::vector<Vec3> surface_samples(const MatX3d& V, const MatX3i& F, int samples)
   return pts;
 }
 
-// max and mean distance from the points to the surface, on two threads.
-std::pair<double, double> one_sided(const std::vector<Vec3>& pts, const geometry::TriangleTree& tree) {
+// Max and mean distance from the points to the surface, and the point of the max, on two threads.
+struct OneSided {
+  double max = 0, mean = 0;
+  Vec3 at = Vec3::Zero();
+};
+OneSided one_sided(const std::vector<Vec3>& pts, const geometry::TriangleTree& tree) {
   const int nt = 2;
   std::vector<double> mx(nt, 0), sum(nt, 0);
+  std::vector<size_t> arg(nt, 0);
   std::vector<std::thread> th;
   for (int t = 0; t < nt; ++t)
     th.emplace_back([&, t] {
       for (size_t i = t; i < pts.size(); i += nt) {
         const double d = std::sqrt(tree.closest(pts[i]).dist2);
-        mx[t] = std::max(mx[t], d);
+        if (d > mx[t]) mx[t] = d, arg[t] = i;
         sum[t] += d;
       }
     });
   for (auto& t : th) t.join();
-  return {std::max(mx[0], mx[1]), pts.empty() ? 0.0 : (sum[0] + sum[1]) / pts.size()};
+  OneSided r;
+  if (pts.empty()) return r;
+  const int w = mx[1] > mx[0] ? 1 : 0;
+  r.max = mx[w];
+  r.at = pts[arg[w]];
+  r.mean = (sum[0] + sum[1]) / pts.size();
+  return r;
 }
 
 }  // namespace
@@ -165,13 +176,15 @@ std::pair<double, double> one_sided(const std::vector<Vec3>& pts, const geometry
 Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const MatX3i& FB, int samples) {
   Hausdorff h;
   const geometry::TriangleTree ta(VA, FA), tb(VB, FB);
-  auto [ab, mab] = one_sided(surface_samples(VA, FA, samples), tb);
-  auto [ba, mba] = one_sided(surface_samples(VB, FB, samples), ta);
-  h.a_to_b = ab;
-  h.b_to_a = ba;
-  h.mean_a_to_b = mab;
-  h.mean_b_to_a = mba;
-  h.max = std::max(ab, ba);
+  const OneSided ab = one_sided(surface_samples(VA, FA, samples), tb);
+  const OneSided ba = one_sided(surface_samples(VB, FB, samples), ta);
+  h.a_to_b = ab.max;
+  h.b_to_a = ba.max;
+  h.mean_a_to_b = ab.mean;
+  h.mean_b_to_a = ba.mean;
+  h.a_to_b_at = ab.at;
+  h.b_to_a_at = ba.at;
+  h.max = std::max(ab.max, ba.max);
   return h;
 }
 

@@ -53,6 +53,8 @@ struct Hausdorff {
   double b_to_a = 0;
   double max = 0;        ///< two-sided: max of both
   double mean_a_to_b = 0, mean_b_to_a = 0;
+  Vec3 a_to_b_at = Vec3::Zero();  ///< the sample of A farthest from B (where a_to_b is reached)
+  Vec3 b_to_a_at = Vec3::Zero();
 };
 Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const MatX3i& FB, int samples = 200000);
 

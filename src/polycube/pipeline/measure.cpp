@@ -74,6 +74,8 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
     j[key]["hausdorff_rel"] = d.max / diag;
     j[key][std::string("hausdorff_") + key + "_to_input"] = d.a_to_b;
     j[key][std::string("hausdorff_input_to_") + key] = d.b_to_a;
+    j[key][std::string("hausdorff_") + key + "_to_input_at"] = {d.a_to_b_at.x(), d.a_to_b_at.y(), d.a_to_b_at.z()};
+    j[key][std::string("hausdorff_input_to_") + key + "_at"] = {d.b_to_a_at.x(), d.b_to_a_at.y(), d.b_to_a_at.z()};
     j[key]["mean_distance_rel"] = 0.5 * (d.mean_a_to_b + d.mean_b_to_a) / diag;
   }
   j["seconds"] = sw.seconds();
