@@ -248,6 +248,32 @@ TEST(Realize, OppositeChartsSharingAPlaneFailWithAReason) {
   EXPECT_NE(r.failure.find("zero thickness"), std::string::npos) << r.failure;
 }
 
+TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {
+  // One triangle inside the top face labelled +X (no cleanup): its three vertices would share x
+  // and z, so the triangle and its tet collapse onto a line and no start untangles them. The
+  // failure comes back with the state reached, in which that triangle does not face +X, so that
+  // extract_polycube can relabel it.
+  auto b = grid_box(3);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  auto labels = chart::label_by_normal(tm.V, tm.boundary);
+  int odd = -1;
+  for (int f = 0; f < tm.boundary.rows() && odd < 0; ++f) {
+    Vec3 c = Vec3::Zero();
+    for (int k = 0; k < 3; ++k) c += tm.V.row(tm.boundary(f, k)).transpose() / 3;
+    if (labels[f] == kPosZ && (c.head<2>() - Eigen::Vector2d(0.5, 0.5)).norm() < 0.2) odd = f;
+  }
+  ASSERT_GE(odd, 0);
+  labels[odd] = kPosX;
+  const auto r = chart::realize_polycube(tm.V, tm.T, tm.boundary, tm.V, labels);
+  EXPECT_FALSE(r.success);
+  ASSERT_GT(r.X.rows(), 0);
+  ASSERT_EQ(r.X.rows(), r.rest.rows());
+  EXPECT_GT(r.inverted, 0);
+  EXPECT_GE(r.misoriented_faces, 1);
+  const Vec3 N = deform::area_normal(r.X, tm.boundary(odd, 0), tm.boundary(odd, 1), tm.boundary(odd, 2));
+  EXPECT_FALSE(N.x() > 1e-12) << "the odd triangle should not face +X";
+}
+
 TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
   // The relaxation of Eq. 17 inverts tets around the hole; plain ARAP steps left one inverted
   // there, the elliptic untangling (Garanzha et al. 2021) removes them all.

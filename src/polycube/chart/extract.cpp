@@ -109,7 +109,13 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // that folds back). They take the most frequent other label of their edge neighbours, the
   // labels are cleaned again, and the realization is retried.
   const MatX3i N = face_adjacency(B);
-  for (int attempt = 0; attempt < opt.relabel_attempts && !e.realized.success && e.realized.inverted == 0 &&
+  // A realization that could not untangle every tet comes back with the state it reached: where a
+  // few tets stay inverted, boundary triangles there face the wrong way too (spot: a chart border
+  // that doubles back along a polycube edge), and the same relabelling applies.
+  for (int attempt = 0; attempt < opt.relabel_attempts && !e.realized.success &&
+                        (e.realized.inverted == 0 ||
+                         (e.realized.inverted <= opt.max_relabel_inverted &&
+                          e.realized.misoriented_faces <= opt.max_relabel_faces)) &&
                         e.realized.misoriented_faces > 0 && e.realized.X.rows() > 0;
        ++attempt) {
     const MatX3d& X = e.realized.X;

@@ -22,6 +22,11 @@ struct ExtractOptions {
   /// When the realization leaves boundary triangles facing away from their label (every tet
   /// positive), relabel them from their neighbours and retry, at most this many times.
   int relabel_attempts = 4;
+  /// The same when the realization could not untangle every tet, if at most this many stay
+  /// inverted and at most max_relabel_faces triangles face away in the state it reached (a few
+  /// local folds of the labelling; a realization that failed wholesale is not patched up).
+  int max_relabel_inverted = 200;
+  int max_relabel_faces = 100;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };

@@ -880,6 +880,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     double arap = 0;
     int flipped = 0, ut = 0, it = 0;
     std::string failure;
+    MatX3d tangled;    ///< failed after untangling: the state it reached
+    int inverted = 0;  ///< and its inverted tets
   };
   auto attempt = [&](const std::string& name, Realizer& solver, const Hooks& log) {
     Attempt a;
@@ -898,6 +900,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
                   std::to_string(ut) + " untangling steps");
         a.failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
                     " untangling steps from the relaxation of Eq. 17";
+        a.tangled = std::move(X);
+        a.inverted = inverted;
         return a;
       }
       solver.set_barrier_weight(opt.barrier_weight);
@@ -933,6 +937,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         if (inverted > 0) {
           a.failure = "moving the deformed mesh onto the planes: " + solver.blocked() + "; " +
                       std::to_string(inverted) + " tets remain inverted after landing and untangling";
+          a.tangled = std::move(X);
+          a.inverted = inverted;
           return a;
         }
       }
@@ -992,7 +998,21 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       r.iterations = a.it;
     }
   }
-  if (!have) return fail(failures);
+  if (!have) {
+    // No start untangled: the state with the fewest inverted tets goes back with the failure, so
+    // that the caller can relabel the boundary triangles that face the wrong way there.
+    const Attempt* least = nullptr;
+    for (const Attempt& a : attempts)
+      if (a.tangled.rows() > 0 && (!least || a.inverted < least->inverted)) least = &a;
+    if (least) {
+      r.X = least->tangled;
+      r.rest = rest;
+      r.T = T;
+      r.inverted = least->inverted;
+      check_faces(B, labels, r);
+    }
+    return fail(failures);
+  }
   hooks.report("polycube", 0.95);
 
   // ---- checks ----

@@ -60,7 +60,8 @@ struct RealizeResult {
   std::string failure;           ///< why, when !success
   MatX3d rest;                   ///< rest positions: the input tet mesh plus the split-edge midpoints
   MatX4i T;                      ///< tets over `rest` / `X` (the input tets, some split)
-  MatX3d X;                      ///< polycube positions
+  MatX3d X;                      ///< polycube positions; on failure after untangling, the state the best start reached
+                                 ///< (with `inverted` and `misoriented_faces` set), for diagnosis and relabelling only
   int split_edges = 0;           ///< interior edges split because both ends lie on one plane
   int split_faces = 0;           ///< interior faces split (at the centroid) because their 3 vertices lie on one plane
   std::string start;             ///< start used ("continuation" or "eq17")
