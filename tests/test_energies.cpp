@@ -239,26 +239,6 @@ TEST(Energies, UntangleGradientAlsoOnInvertedTets) {
   EXPECT_NEAR(e0, 0.5 * 3 + 0.5 * 2, 1e-9);
 }
 
-TEST(Energies, UntangleHessianExactAndProjected) {
-  Small s = small_mesh();
-  ArapRest rest = ArapRest::build(s.X0, s.T);
-  MatX3d M = s.X;
-  M.col(0) *= -1;  // every tet inverted
-  for (double eps : {1e-1, 3e-2})
-    for (const MatX3d* X : {&s.X, &M}) {
-      EnergyFn Ex = [&](const MatX3d& Y, Eigen::VectorXd* g, HessianSink* H) {
-        return untangle_energy(Y, s.T, rest, eps, 1.3, 0.5, g, H, false);
-      };
-      EnergyFn Ep = [&](const MatX3d& Y, Eigen::VectorXd* g, HessianSink* H) {
-        return untangle_energy(Y, s.T, rest, eps, 1.3, 0.5, g, H, true);
-      };
-      const Eigen::MatrixXd Hfd = fd_hessian(Ex, *X, 1e-6), Hx = hessian(Ex, *X), Hp = hessian(Ep, *X);
-      EXPECT_LE((Hx - Hfd).norm(), 1e-5 * Hfd.norm()) << "eps " << eps;
-      expect_psd(Hp);
-      expect_psd(Hp - Hx);  // projection only removes negative curvature
-    }
-}
-
 TEST(Energies, BarrierGradientAndPsd) {
   Small s = small_mesh();
   auto pairs = face_pairs(s.F);

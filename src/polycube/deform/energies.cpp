@@ -404,29 +404,8 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   return weight * E;
 }
 
-namespace {
-// Hessian of D = det J over J (9 x 9, J column-major: entry (k, m) at 3m + k): with columns j0,
-// j1, j2, dD/dj0 = j1 x j2 etc., so the (0, 1) block is -[j2]x, the (0, 2) block [j1]x, the
-// (1, 2) block -[j0]x, the diagonal blocks zero.
-Eigen::Matrix<double, 9, 9> det_hessian(const Eigen::Matrix3d& J) {
-  auto skew = [](const Vec3& a) {
-    Eigen::Matrix3d S;
-    S << 0, -a.z(), a.y(), a.z(), 0, -a.x(), -a.y(), a.x(), 0;
-    return S;
-  };
-  Eigen::Matrix<double, 9, 9> H = Eigen::Matrix<double, 9, 9>::Zero();
-  H.block<3, 3>(0, 3) = -skew(J.col(2));
-  H.block<3, 3>(0, 6) = skew(J.col(1));
-  H.block<3, 3>(3, 6) = -skew(J.col(0));
-  H.block<3, 3>(3, 0) = H.block<3, 3>(0, 3).transpose();
-  H.block<3, 3>(6, 0) = H.block<3, 3>(0, 6).transpose();
-  H.block<3, 3>(6, 3) = H.block<3, 3>(3, 6).transpose();
-  return H;
-}
-}  // namespace
-
 double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
-                       double theta, Eigen::VectorXd* grad, HessianSink* hess, bool project) {
+                       double theta, Eigen::VectorXd* grad) {
   double E = 0;
   for (int t = 0; t < T.rows(); ++t) {
     const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
@@ -439,46 +418,19 @@ double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, d
     const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
     const double f = J.squaredNorm() / chi23, g = (D * D + 1) / chi;
     E += rest.w[t] * ((1 - theta) * f + theta * g);
-    if (!grad && !hess) continue;
+    if (!grad) continue;
     const double dchi = chi / root;  // chi'(D)
     Eigen::Matrix3d cof;             // dD/dJ, valid for any sign of D
     cof.col(0) = J.col(1).cross(J.col(2));
     cof.col(1) = J.col(2).cross(J.col(0));
     cof.col(2) = J.col(0).cross(J.col(1));
-    const double dg = (2 * D - g * dchi) / chi;  // d g / d D
+    const Eigen::Matrix3d dEdF = rest.w[t] / scale *
+                                 ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) +
+                                  theta * ((2 * D - g * dchi) / chi) * cof);
     const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
-    if (grad) {
-      const Eigen::Matrix3d dEdF = rest.w[t] / scale *
-                                   ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) + theta * dg * cof);
-      Eigen::Matrix<double, 12, 1> ge;
-      for (int p = 0; p < 4; ++p) ge.segment<3>(3 * p) = dEdF * B.row(p).transpose();
-      scatter_grad<12>(*grad, v, ge);
-    }
-    if (!hess) continue;
-    // Over J (9 x 9): f = |J|^2 chi^(-2/3), g = (D^2 + 1) / chi, with chi'' = eps^2 / (2 root^3).
-    const double d2chi = eps * eps / (2 * root * root * root);
-    const Eigen::Map<const Eigen::Matrix<double, 9, 1>> j(J.data()), c(cof.data());
-    const Eigen::Matrix<double, 9, 9> HD = det_hessian(J);
-    const double a = J.squaredNorm();
-    const double c53 = chi23 * chi;  // chi^(5/3)
-    Eigen::Matrix<double, 9, 9> Hf = (2 / chi23) * Eigen::Matrix<double, 9, 9>::Identity();
-    Hf -= (4.0 / 3.0) * dchi / c53 * (j * c.transpose() + c * j.transpose());
-    Hf += a * ((10.0 / 9.0) * dchi * dchi / (c53 * chi) - (2.0 / 3.0) * d2chi / c53) * (c * c.transpose());
-    Hf -= (2.0 / 3.0) * a * dchi / c53 * HD;
-    const double d2g = 2 / chi - 4 * D * dchi / (chi * chi) - (D * D + 1) * d2chi / (chi * chi) +
-                       2 * (D * D + 1) * dchi * dchi / (chi * chi * chi);
-    Eigen::Matrix<double, 9, 9> HJ = (1 - theta) * Hf + theta * (d2g * (c * c.transpose()) + dg * HD);
-    if (project) {
-      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>> es(HJ);
-      HJ = es.eigenvectors() * es.eigenvalues().cwiseMax(0.0).asDiagonal() * es.eigenvectors().transpose();
-    }
-    // x_p[k] enters J(k, m) with weight B(p, m) / scale.
-    Eigen::Matrix<double, 9, 12> G = Eigen::Matrix<double, 9, 12>::Zero();
-    for (int p = 0; p < 4; ++p)
-      for (int m = 0; m < 3; ++m)
-        for (int k = 0; k < 3; ++k) G(3 * m + k, 3 * p + k) = B(p, m) / scale;
-    const Eigen::Matrix<double, 12, 12> He = rest.w[t] * G.transpose() * HJ * G;
-    hess->add(v, 4, He);
+    Eigen::Matrix<double, 12, 1> ge;
+    for (int p = 0; p < 4; ++p) ge.segment<3>(3 * p) = dEdF * B.row(p).transpose();
+    scatter_grad<12>(*grad, v, ge);
   }
   return E;
 }

@@ -124,10 +124,9 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
 /// D = det J, chi(D) = (D + sqrt(eps^2 + D^2)) / 2. Finite for inverted tets (unlike a barrier);
 /// as eps -> 0 an inverted tet costs without bound, so minimizing it with eps decreasing untangles
 /// a map. `scale` sets the volume ratio the energy prefers (cube root of the mean det F).
-/// Gradient and Hessian exact; `project` (default) clamps the negative eigenvalues of each tet's
-/// 9 x 9 Hessian over J to zero, so the sum is PSD (for Newton steps).
+/// Gradient exact (no Hessian: it is minimized by quasi-Newton).
 double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
-                       double theta, Eigen::VectorXd* grad, HessianSink* hess = nullptr, bool project = true);
+                       double theta, Eigen::VectorXd* grad);
 
 /// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
 /// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
