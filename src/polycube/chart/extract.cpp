@@ -110,8 +110,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // labels are cleaned again, and the realization is retried.
   const MatX3i N = face_adjacency(B);
   // A realization that could not untangle every tet comes back with the state it reached: where a
-  // few tets stay inverted, boundary triangles there face the wrong way too (spot: a chart border
-  // that doubles back along a polycube edge), and the same relabelling applies.
+  // few tets stay inverted, boundary triangles there face the wrong way too (a chart border that
+  // doubles back along a polycube edge), and the same relabelling applies (fandisk at 37.7k tets:
+  // 2 tets left inverted, 13 then 4 triangles relabelled, then realized).
   for (int attempt = 0; attempt < opt.relabel_attempts && !e.realized.success &&
                         (e.realized.inverted == 0 ||
                          (e.realized.inverted <= opt.max_relabel_inverted &&

@@ -1001,11 +1001,11 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (!have) {
     // No start untangled: the state with the fewest inverted tets goes back with the failure, so
     // that the caller can relabel the boundary triangles that face the wrong way there.
-    const Attempt* least = nullptr;
-    for (const Attempt& a : attempts)
+    Attempt* least = nullptr;
+    for (Attempt& a : attempts)
       if (a.tangled.rows() > 0 && (!least || a.inverted < least->inverted)) least = &a;
     if (least) {
-      r.X = least->tangled;
+      r.X = std::move(least->tangled);
       r.rest = rest;
       r.T = T;
       r.inverted = least->inverted;
