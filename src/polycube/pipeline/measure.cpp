@@ -28,6 +28,17 @@ SurfaceMesh surface_of(const MeshData& m) {
 
 }  // namespace
 
+void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key) {
+  auto point = [](const Vec3& p) { return nlohmann::json::array({p.x(), p.y(), p.z()}); };
+  j["hausdorff"] = d.max;
+  j["hausdorff_rel"] = d.max / diag;
+  j["hausdorff_" + key + "_to_input"] = d.a_to_b;
+  j["hausdorff_input_to_" + key] = d.b_to_a;
+  j["hausdorff_" + key + "_to_input_at"] = point(d.a_to_b_at);
+  j["hausdorff_input_to_" + key + "_at"] = point(d.b_to_a_at);
+  j["mean_distance_rel"] = 0.5 * (d.mean_a_to_b + d.mean_b_to_a) / diag;
+}
+
 nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
   Stopwatch sw;
   hooks.info("reading " + opt.path);
@@ -70,13 +81,7 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
       for (int k = 0; k < 3; ++k) box.extend(rs.V.row(rs.F(f, k)).transpose());
     const double diag = box.diagonal().norm();
     j["reference"] = {{"path", opt.reference}, {"bbox_diagonal", diag}};
-    j[key]["hausdorff"] = d.max;
-    j[key]["hausdorff_rel"] = d.max / diag;
-    j[key][std::string("hausdorff_") + key + "_to_input"] = d.a_to_b;
-    j[key][std::string("hausdorff_input_to_") + key] = d.b_to_a;
-    j[key][std::string("hausdorff_") + key + "_to_input_at"] = {d.a_to_b_at.x(), d.a_to_b_at.y(), d.a_to_b_at.z()};
-    j[key][std::string("hausdorff_input_to_") + key + "_at"] = {d.b_to_a_at.x(), d.b_to_a_at.y(), d.b_to_a_at.z()};
-    j[key]["mean_distance_rel"] = 0.5 * (d.mean_a_to_b + d.mean_b_to_a) / diag;
+    add_hausdorff(j[key], d, diag, key);
   }
   j["seconds"] = sw.seconds();
   return j;

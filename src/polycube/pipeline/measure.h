@@ -6,6 +6,7 @@
 #include <string>
 
 #include "polycube/core/log.h"
+#include "polycube/hex/quality.h"
 
 namespace polycube {
 
@@ -19,5 +20,10 @@ struct MeasureOptions {
 /// hausdorff, hausdorff_rel, ...}} (or "quad": {...} for a quad mesh). Throws Error(InvalidMesh) when
 /// the file has neither hexahedra nor quadrilaterals.
 nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks = {});
+
+/// Adds the Hausdorff figures of mesh `key` ("hex", "quad") against the input to j: hausdorff,
+/// hausdorff_rel (/ diag), hausdorff_KEY_to_input, hausdorff_input_to_KEY, the points where those
+/// are reached (..._at), mean_distance_rel. Shared by `polycube measure` and the hex stage.
+void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key);
 
 }  // namespace polycube

@@ -16,6 +16,7 @@
 #include "polycube/hex/extract.h"
 #include "polycube/hex/snap.h"
 #include "polycube/io/writers.h"
+#include "polycube/pipeline/measure.h"
 #include "polycube/validate/tetmesh.h"
 
 namespace polycube {
@@ -701,13 +702,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                       {"below_0_5", q.below_0_5}, {"sj_histogram", hist}};
         };
         json hj = quality_json(hr.quality);
-        hj["hausdorff"] = hd.max;
-        hj["hausdorff_rel"] = hd.max / diag;
-        hj["hausdorff_hex_to_input"] = hd.a_to_b;
-        hj["hausdorff_input_to_hex"] = hd.b_to_a;
-        hj["hausdorff_hex_to_input_at"] = {hd.a_to_b_at.x(), hd.a_to_b_at.y(), hd.a_to_b_at.z()};
-        hj["hausdorff_input_to_hex_at"] = {hd.b_to_a_at.x(), hd.b_to_a_at.y(), hd.b_to_a_at.z()};
-        hj["mean_distance_rel"] = 0.5 * (hd.mean_a_to_b + hd.mean_b_to_a) / diag;
+        add_hausdorff(hj, hd, diag, "hex");
         hj["vertices"] = hr.V.rows();
         hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
