@@ -219,6 +219,24 @@ TEST(Energies, VolumeBarrierGradientAndPsd) {
   EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), -0.3 * std::log(8.0), 1e-12);
 }
 
+TEST(Energies, VolumeBarrierPerTetMultipliers) {
+  Small s = small_mesh();
+  ArapRest rest = ArapRest::build(s.X0, s.T);
+  std::vector<double> boost(s.T.rows(), 1.0);
+  boost[0] = 100.0;
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return volume_barrier_energy(X, s.T, rest, 0.3, g, H, &boost);
+  };
+  expect_gradient(E, s.X);
+  expect_psd(hessian(E, s.X));
+  // Uniform scaling by 2: every tet contributes w_t b_t (-log 8); tet 0 now 100 times.
+  const double expected = -0.3 * std::log(8.0) * (1.0 + 99.0 * rest.w[0]);
+  EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), expected, 1e-12);
+  // All multipliers 1 is the plain barrier.
+  std::fill(boost.begin(), boost.end(), 1.0);
+  EXPECT_NEAR(E(s.X, nullptr, nullptr), volume_barrier_energy(s.X, s.T, rest, 0.3, nullptr, nullptr), 1e-14);
+}
+
 TEST(Energies, UntangleGradientAlsoOnInvertedTets) {
   Small s = small_mesh();
   ArapRest rest = ArapRest::build(s.X0, s.T);

@@ -1,5 +1,7 @@
 #include "polycube/deform/energies.h"
 
+#include "polycube/core/error.h"
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -381,9 +383,11 @@ std::vector<std::array<int, 2>> border_edges(const MatX3i& F) {
 }
 
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
-                             Eigen::VectorXd* grad, HessianSink* hess) {
+                             Eigen::VectorXd* grad, HessianSink* hess, const std::vector<double>* boost) {
+  POLYCUBE_ASSERT(!boost || boost->size() == static_cast<size_t>(T.rows()), "one barrier multiplier per tet");
   double E = 0;
   for (int t = 0; t < T.rows(); ++t) {
+    const double wt = boost ? rest.w[t] * (*boost)[t] : rest.w[t];
     const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
     Eigen::Matrix3d Ds;
     for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
@@ -391,15 +395,15 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     const Eigen::Matrix3d Fm = Ds * Di;
     const double J = Fm.determinant();
     if (!(J > 0)) return std::numeric_limits<double>::infinity();
-    E -= rest.w[t] * std::log(J);
+    E -= wt * std::log(J);
     if (!grad && !hess) continue;
     // dJ/dF = cof(F) = J F^-T; dF/dx_p = (row p of B) as in arap_energy.
     const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
     const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
     Eigen::Matrix<double, 12, 1> dJ;
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
-    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * rest.w[t] / J * dJ));
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * rest.w[t] / (J * J) * dJ * dJ.transpose()));
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * wt / J * dJ));
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
   }
   return weight * E;
 }

@@ -29,6 +29,11 @@ struct DeformOptions {
   /// The volume-barrier weight is multiplied by 4 whenever tets about to invert cut a line search
   /// short, up to this value.
   double volume_barrier_max = 0.1;
+  /// Per tet, the volume barrier is multiplied by this whenever the full SQP step would invert the
+  /// tet, up to volume_boost_max (1 disables it). Slivers weigh almost nothing in the
+  /// volume-weighted barrier, and one sliver flattened by the step cuts the whole step short.
+  double volume_boost_factor = 10.0;
+  double volume_boost_max = 1e6;
   /// Open surfaces (surface mode): weight of the border l1 term relative to E1. The border edges
   /// weigh like a band of width border_weight x area / border length (see border_l1_energy).
   double border_weight = 1.0;
