@@ -141,6 +141,10 @@ int main(int argc, char** argv) {
   app.add_option("--volume-barrier", d.volume_barrier_weight,
                  "Polycube deformation: weight of the log barrier on tet volumes (0 = off, as in the paper)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--volume-boost", d.volume_boost_factor,
+                 "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "
+                 "would invert the tet (1 = off)")
+      ->capture_default_str()->check(CLI::Range(1.0, 1e3));
   app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
       ->capture_default_str()->check(CLI::Range(1, 100));
   app.add_option("--max-iterations", d.max_inner_iterations, "Polycube deformation: SQP iterations per schedule step at most")

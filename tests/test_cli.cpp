@@ -199,6 +199,9 @@ TEST(Cli, UntilDeformWritesDeformedMeshAndConvergenceRecord) {
   for (const char* k : {"e1", "e_arap", "error_d", "alpha", "eps", "step", "seconds"})
     EXPECT_TRUE(p["history"][0].contains(k)) << k;
   EXPECT_GE(j["timings"]["deform"].get<double>(), 0.0);
+  EXPECT_GE(p["boosted_tets"].get<int>(), 0);
+  EXPECT_LE(p["boosted_tets"].get<int>(), j["tetmesh"]["tets"].get<int>());
+  EXPECT_EQ(p["options"]["volume_boost"].get<double>(), 3.0);
   MeshData m = io::read_mesh(out + "/deformed.vtk");
   EXPECT_EQ(m.T.rows(), j["tetmesh"]["tets"].get<int>());
   EXPECT_EQ(measure_tets(m.V, m.T).inverted, 0);
@@ -206,6 +209,17 @@ TEST(Cli, UntilDeformWritesDeformedMeshAndConvergenceRecord) {
   MeshData t = io::read_mesh(out + "/tetmesh.mesh");
   // Same connectivity as the tet mesh: the pair is the volumetric map.
   EXPECT_EQ(m.T, t.T);
+}
+
+TEST(Cli, VolumeBoostOption) {
+  std::string out = temp_dir("boost");
+  RunResult r = run_cli("--example sphere --example-size 0.08 --until deform --volume-boost 1 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["polycube"]["options"]["volume_boost"].get<double>(), 1.0);
+  EXPECT_EQ(j["polycube"]["boosted_tets"].get<int>(), 0);  // 1 = off: no multiplier raised
+  EXPECT_LT(j["polycube"]["l1_quality"].get<double>(), 1e-3);
+  EXPECT_EQ(run_cli("--example sphere --until deform --volume-boost 0.5 -q -o " + out).code, 2);
 }
 
 namespace {

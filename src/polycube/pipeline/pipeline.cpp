@@ -402,7 +402,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"seconds", dr.seconds},
                  {"factorizations", dr.factorizations},
                  {"distortion", opt.surface ? "surface_arap" : "volume_arap"},
-                 {"volume_barrier_weight", dr.volume_barrier_weight}};
+                 {"volume_barrier_weight", dr.volume_barrier_weight},
+                 {"boosted_tets", dr.boosted_tets}};
       pj["rotation"] = json::array();
       for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
       json hist = json::array();
@@ -414,6 +415,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (!input_closed) pj["border_l1_quality"] = dr.border_quality;
       pj["options"] = {{"alpha0", opt.deform.alpha0}, {"eps0", opt.deform.eps0}, {"eps_min", opt.deform.eps_min},
                        {"beta", opt.deform.beta}, {"barrier_weight", barrier_weight},
+                       {"volume_barrier", opt.deform.volume_barrier_weight},
+                       {"volume_boost", opt.deform.volume_boost_factor},
                        {"max_alpha_steps", opt.deform.max_alpha_steps},
                        {"max_inner_iterations", opt.deform.max_inner_iterations},
                        {"target_quality", opt.deform.target_quality}};
