@@ -1,7 +1,5 @@
 #include "polycube/deform/energies.h"
 
-#include "polycube/core/error.h"
-
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -9,6 +7,8 @@
 #include <limits>
 #include <map>
 #include <thread>
+
+#include "polycube/core/error.h"
 
 namespace polycube::deform {
 

@@ -357,14 +357,12 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         p.volume_weight = std::min(opt.volume_barrier_max, 4 * p.volume_weight);
         factor_valid = false;
       }
-      // The tets the full step would invert get a stronger barrier (x volume_boost_factor), so
-      // that the next directions keep them open: the volume-weighted barrier barely holds slivers, whose flattening
-      // otherwise cuts every later step short (fandisk, 38k tets: steps of 1e-3 from alpha 12.8
-      // on, l1_quality stuck at 1.3e-2).
-      // The reused factorization stays: CG absorbs the change (a new factorization after each
-      // raise: same result, 26 -> 30 s).
-      // Raised already when they cut the step to 1/2: waiting for 1/8 (as for the global weight
-      // above) left fandisk stalled at 1.3e-2.
+      // The tets the full step would invert get a stronger barrier, so that the next directions
+      // keep them open: the volume-weighted barrier barely holds slivers, and one flattened sliver
+      // cuts the whole step short (fandisk, 38k tets: steps of 1e-3 from alpha 12.8 on,
+      // l1_quality stuck at 1.3e-2). Raised as soon as they halve the step (waiting for 1/8, as
+      // for the global weight above, left fandisk stalled); the reused factorization stays, CG
+      // absorbs the change (a new factorization after each raise: same result, 26 -> 30 s).
       for (int tt : blocking) p.boost[tt] = std::min(opt.volume_boost_max, p.boost[tt] * opt.volume_boost_factor);
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.
