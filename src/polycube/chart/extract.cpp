@@ -7,6 +7,7 @@
 
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
+#include "polycube/validate/tetmesh.h"
 
 namespace polycube::chart {
 
@@ -109,6 +110,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // that folds back). They take the most frequent other label of their edge neighbours, the
   // labels are cleaned again, and the realization is retried.
   const MatX3i N = face_adjacency(B);
+  bool widen = false;
   // A realization that could not untangle every tet comes back with the state it reached: where a
   // few tets stay inverted, boundary triangles there face the wrong way too (a chart border that
   // doubles back along a polycube edge), and the same relabelling applies (fandisk at 37.7k tets:
@@ -117,7 +119,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                         (e.realized.inverted == 0 ||
                          (e.realized.inverted <= opt.max_relabel_inverted &&
                           e.realized.misoriented_faces <= opt.max_relabel_faces)) &&
-                        e.realized.misoriented_faces > 0 && e.realized.X.rows() > 0;
+                        (e.realized.misoriented_faces > 0 || e.realized.inverted > 0) && e.realized.X.rows() > 0;
        ++attempt) {
     const MatX3d& X = e.realized.X;
     const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
@@ -133,6 +135,24 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       hooks.debug("misoriented triangle " + std::to_string(f) + " (" + std::to_string(B(f, 0)) + " " +
                   std::to_string(B(f, 1)) + " " + std::to_string(B(f, 2)) + ") label " + label_name(e.labels[f]) +
                   ", area " + std::to_string(0.5 * (b - a).cross(c - a).norm()));
+    }
+    // Where the relabelling came to nothing (no misoriented triangle, or the cleanup undid it) and
+    // tets stay inverted, the triangles around their boundary vertices are relabelled instead:
+    // there a border vertex is pressed onto a corner of its own polycube edge (spot: an edge of
+    // zero length between two corners, the last tet left flat).
+    if (widen && e.realized.inverted > 0 && e.realized.T.rows() > 0) {
+      const MatX3d& R = e.realized.rest;
+      const MatX4i& TT = e.realized.T;
+      std::vector<char> at(X.rows(), 0);
+      for (int t = 0; t < TT.rows(); ++t) {
+        const double v0 = tet_volume(R.row(TT(t, 0)).transpose(), R.row(TT(t, 1)).transpose(), R.row(TT(t, 2)).transpose(), R.row(TT(t, 3)).transpose());
+        const double v1 = tet_volume(X.row(TT(t, 0)).transpose(), X.row(TT(t, 1)).transpose(), X.row(TT(t, 2)).transpose(), X.row(TT(t, 3)).transpose());
+        if (!(v1 * v0 > 0))
+          for (int j = 0; j < 4; ++j) at[TT(t, j)] = 1;
+      }
+      for (int f = 0; f < B.rows(); ++f)
+        if (!bad[f] && (at[B(f, 0)] || at[B(f, 1)] || at[B(f, 2)])) bad[f] = 1, ++nbad;
+      hooks.debug("relabelling the " + std::to_string(nbad) + " triangles around the inverted tets");
     }
     std::vector<int> next = e.labels;
     int changed = 0;
@@ -156,10 +176,14 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         progress = true;
       }
     }
-    if (changed == 0) break;
-    const CleanupStats again = cleanup_labels(deformed, B, next, opt.cleanup);
+    const CleanupStats again = changed > 0 ? cleanup_labels(deformed, B, next, opt.cleanup) : CleanupStats{};
     if (next == e.labels) {
-      // The cleanup undid the relabelling (e.g. the triangles were zigzags): nothing new to try.
+      // Nothing changed, or the cleanup undid the relabelling (e.g. the triangles were zigzags).
+      if (!widen && e.realized.inverted > 0) {
+        widen = true;
+        --attempt;
+        continue;
+      }
       hooks.debug("relabelling the misoriented triangles is undone by the cleanup; no retry");
       break;
     }

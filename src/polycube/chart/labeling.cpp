@@ -166,6 +166,43 @@ int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vecto
   return changed;
 }
 
+// Step 2b: a border vertex whose fan in a chart is one triangle, nearly flat there (angle over
+// 150 degrees in X): on the polycube the chart's angle at that vertex is 180 (a straight border)
+// or 270 degrees (a reflex corner), which one triangle cannot span, so the tets under it must
+// invert (tet/hand: corner 4155 of a +X chart, 179.9 degrees). The triangle takes the label that
+// most of its edge neighbours of other charts have.
+int fix_wide_fans(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector<int>& labels) {
+  const Charts c = build_charts(X, F, labels);
+  const int nv = static_cast<int>(X.rows());
+  std::vector<std::vector<int>> vcharts(nv);
+  std::map<std::pair<int, int>, int> fan;  // (vertex, chart) -> triangles
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      auto& v = vcharts[F(f, k)];
+      if (std::find(v.begin(), v.end(), c.of_face[f]) == v.end()) v.push_back(c.of_face[f]);
+      fan[{F(f, k), c.of_face[f]}]++;
+    }
+  const double wide = std::cos(150.0 * M_PI / 180.0);
+  int changed = 0;
+  for (int f = 0; f < F.rows(); ++f)
+    for (int j = 0; j < 3; ++j) {
+      const int v = F(f, j);
+      if (vcharts[v].size() < 2 || fan[{v, c.of_face[f]}] != 1) continue;
+      const Vec3 a = (X.row(F(f, (j + 1) % 3)) - X.row(v)).transpose();
+      const Vec3 b = (X.row(F(f, (j + 2) % 3)) - X.row(v)).transpose();
+      if (!(a.dot(b) < wide * a.norm() * b.norm())) continue;
+      int votes[6] = {0, 0, 0, 0, 0, 0};
+      for (int k = 0; k < 3; ++k)
+        if (N(f, k) >= 0 && labels[N(f, k)] != labels[f]) votes[labels[N(f, k)]]++;
+      const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
+      if (votes[best] == 0) continue;
+      labels[f] = best;
+      ++changed;
+      break;
+    }
+  return changed;
+}
+
 }  // namespace
 
 int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& F, std::vector<int>& labels,
@@ -224,7 +261,7 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       changed |= z > 0;
     }
     if (opt.fix_degenerate) {
-      const int d = fix_degenerate(X, F, N, labels);
+      const int d = fix_degenerate(X, F, N, labels) + fix_wide_fans(X, F, N, labels);
       s.degenerate += d;
       changed |= d > 0;
     }

@@ -11,6 +11,10 @@ struct LbfgsOptions {
   int memory = 8;                ///< correction pairs kept
   int max_iterations = 300;      ///< accepted steps at most
   double decrease_tol = 1e-13;   ///< stop when a step lowers the energy by less than this, relatively
+  /// Largest change of one unknown tried first (0 = no limit): the line search starts at the step
+  /// that moves no unknown further than this. Untangling nearly flat tets gives preconditioned
+  /// directions 1e5 x too long, beyond what 30 halvings bring back.
+  double max_change = 0;
 };
 
 /// Minimizes f from z (updated in place) by L-BFGS (two-loop recursion with H0 = gamma P^-1, P^-1
@@ -50,6 +54,7 @@ inline int lbfgs_minimize(Eigen::VectorXd& z, const std::function<double(const E
       if (!(slope < 0)) break;
     }
     double step = 1, Et = E;
+    if (opt.max_change > 0) step = std::min(1.0, opt.max_change / std::max(d.lpNorm<Eigen::Infinity>(), 1e-300));
     bool ok = false;
     for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
       Et = f(z + step * d, &gt);

@@ -408,21 +408,18 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   return weight * E;
 }
 
-double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
-                       double theta, Eigen::VectorXd* grad) {
-  double E = 0;
-  for (int t = 0; t < T.rows(); ++t) {
-    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-    Eigen::Matrix3d Ds;
-    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-    const Eigen::Matrix3d J = Ds * Di / scale;
-    const double D = J.determinant();
-    const double root = std::sqrt(eps * eps + D * D);
-    const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
-    const double f = J.squaredNorm() / chi23, g = (D * D + 1) / chi;
-    E += rest.w[t] * ((1 - theta) * f + theta * g);
-    if (!grad) continue;
+double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps, double scale,
+                           double theta, Eigen::Matrix<double, 12, 1>* grad) {
+  const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+  Eigen::Matrix3d Ds;
+  for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+  const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+  const Eigen::Matrix3d J = Ds * Di / scale;
+  const double D = J.determinant();
+  const double root = std::sqrt(eps * eps + D * D);
+  const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
+  const double f = J.squaredNorm() / chi23, g = (D * D + 1) / chi;
+  if (grad) {
     const double dchi = chi / root;  // chi'(D)
     Eigen::Matrix3d cof;             // dD/dJ, valid for any sign of D
     cof.col(0) = J.col(1).cross(J.col(2));
@@ -432,8 +429,19 @@ double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, d
                                  ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) +
                                   theta * ((2 * D - g * dchi) / chi) * cof);
     const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
-    Eigen::Matrix<double, 12, 1> ge;
-    for (int p = 0; p < 4; ++p) ge.segment<3>(3 * p) = dEdF * B.row(p).transpose();
+    for (int p = 0; p < 4; ++p) grad->segment<3>(3 * p) = dEdF * B.row(p).transpose();
+  }
+  return rest.w[t] * ((1 - theta) * f + theta * g);
+}
+
+double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
+                       double theta, Eigen::VectorXd* grad) {
+  double E = 0;
+  Eigen::Matrix<double, 12, 1> ge;
+  for (int t = 0; t < T.rows(); ++t) {
+    E += untangle_tet_energy(X, T, rest, t, eps, scale, theta, grad ? &ge : nullptr);
+    if (!grad) continue;
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
     scatter_grad<12>(*grad, v, ge);
   }
   return E;

@@ -130,6 +130,11 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
 double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
                        double theta, Eigen::VectorXd* grad);
 
+/// The term of untangle_energy for one tet t of T; `grad` (optional) receives its gradient over
+/// the tet's 12 coordinates (vertex-major).
+double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps, double scale,
+                           double theta, Eigen::Matrix<double, 12, 1>* grad);
+
 /// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
 /// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
 double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
