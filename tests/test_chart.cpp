@@ -118,6 +118,35 @@ TEST(Chart, CleanupRemovesIslandsAndWedges) {
   EXPECT_EQ(labels, good);
 }
 
+TEST(Chart, CleanupRelabelsASingleFlatTriangleAtABorderVertex) {
+  // A flat patch: vertex m touches three charts; its only +Z triangle (m, q, p) has an angle of
+  // 180 - 2 atan(h) degrees at m: 157 for h = 0.2 (no polycube can open one triangle to the
+  // 180 or 270 degrees the chart needs there), 90 for h = 1 (fine, kept).
+  for (double h : {0.2, 1.0}) {
+    MatX3d V(7, 3);
+    V << 0, 0, 0, -1, h, 0, 1, h, 0, -2, 0, 0, 2, 0, 0, -1, 2, 0, 1, 2, 0;
+    MatX3i F(7, 3);
+    F << 0, 2, 1, 3, 0, 1, 0, 4, 2, 1, 2, 6, 1, 6, 5, 3, 1, 5, 2, 4, 6;
+    std::vector<int> labels = {kPosZ, kNegY, kPosX, kPosZ, kPosZ, kNegY, kPosX};
+    chart::CleanupOptions o;
+    o.straighten = false;
+    o.remove_low_degree = false;
+    o.separate_opposite = false;
+    const auto st = chart::cleanup_labels(V, F, labels, o);
+    const std::vector<int> given = {kPosZ, kNegY, kPosX, kPosZ, kPosZ, kNegY, kPosX};
+    if (h < 0.5) {
+      // The first of the two tied neighbour labels; then (p, q, w) has its three vertices on the
+      // grown +X chart and follows it (the older rule for triangles that would be flattened).
+      EXPECT_EQ(labels[0], kPosX);
+      EXPECT_GE(st.degenerate, 1);
+    } else {
+      EXPECT_EQ(st.degenerate, 0);
+      EXPECT_EQ(labels, given);
+    }
+    for (int f : {1, 2, 5, 6}) EXPECT_EQ(labels[f], given[f]);
+  }
+}
+
 TEST(Chart, OppositeChartsSideBySideAreReported) {
   auto s = grid_box(4);
   auto labels = chart::label_by_normal(s.V, s.F);

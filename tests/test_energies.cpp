@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 #include <random>
 
+#include "polycube/core/lbfgs.h"
 #include "polycube/deform/energies.h"
 #include "polycube/validate/tetmesh.h"
 #include "test_util.h"
@@ -255,6 +256,51 @@ TEST(Energies, UntangleGradientAlsoOnInvertedTets) {
   // At the rest shape scaled by `scale` (J = I) with eps -> 0: (1 - theta) 3 + theta 2.
   const double e0 = untangle_energy(1.3 * s.X0, s.T, rest, 1e-12, 1.3, 0.5, nullptr);
   EXPECT_NEAR(e0, 0.5 * 3 + 0.5 * 2, 1e-9);
+}
+
+TEST(Energies, UntangleTetTermsSumToTheEnergy) {
+  Small s = small_mesh();
+  ArapRest rest = ArapRest::build(s.X0, s.T);
+  MatX3d M = s.X;
+  M.row(0) *= -1;  // some tets inverted
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(M.size()), gs = Eigen::VectorXd::Zero(M.size());
+  const double E = untangle_energy(M, s.T, rest, 1e-2, 1.1, 0.5, &g);
+  double sum = 0;
+  for (int t = 0; t < s.T.rows(); ++t) {
+    Eigen::Matrix<double, 12, 1> ge;
+    sum += untangle_tet_energy(M, s.T, rest, t, 1e-2, 1.1, 0.5, &ge);
+    for (int j = 0; j < 4; ++j) gs.segment<3>(3 * s.T(t, j)) += ge.segment<3>(3 * j);
+  }
+  EXPECT_NEAR(sum, E, 1e-12 * std::abs(E));
+  EXPECT_LT((g - gs).norm(), 1e-12 * g.norm());
+}
+
+TEST(Lbfgs, BoundedFirstStepStillReachesTheMinimum) {
+  // f(z) = 0.5 (z - c)^T A (z - c), A diagonal and badly scaled; start 10 away from c.
+  const Eigen::Vector3d a(1.0, 100.0, 1e4), c(1.0, -2.0, 3.0);
+  auto f = [&](const Eigen::VectorXd& z, Eigen::VectorXd* g) {
+    const Eigen::VectorXd d = z - c;
+    if (g) *g = a.cwiseProduct(d);
+    return 0.5 * d.dot(a.cwiseProduct(d));
+  };
+  auto identity = [](const Eigen::VectorXd& q) { return q; };
+  for (double limit : {0.0, 0.5}) {
+    Eigen::VectorXd z = c + Eigen::Vector3d(10, 10, 10);
+    LbfgsOptions o;
+    o.max_change = limit;
+    o.max_iterations = 1;
+    double E = 0;
+    const Eigen::VectorXd z0 = z;
+    ASSERT_EQ(lbfgs_minimize(z, f, identity, o, E), 1);
+    // With the limit, the first accepted step moves no unknown further than it.
+    if (limit > 0) {
+      EXPECT_LE((z - z0).lpNorm<Eigen::Infinity>(), limit * (1 + 1e-12));
+    }
+    o.max_iterations = 500;
+    o.decrease_tol = 0;
+    lbfgs_minimize(z, f, identity, o, E);
+    EXPECT_LT((z - c).norm(), 1e-6) << "limit " << limit;
+  }
 }
 
 TEST(Energies, BarrierGradientAndPsd) {
