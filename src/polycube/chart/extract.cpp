@@ -144,10 +144,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       const MatX3d& R = e.realized.rest;
       const MatX4i& TT = e.realized.T;
       std::vector<char> at(X.rows(), 0);
+      auto volume = [&](const MatX3d& P, int t) {
+        return tet_volume(P.row(TT(t, 0)).transpose(), P.row(TT(t, 1)).transpose(), P.row(TT(t, 2)).transpose(),
+                          P.row(TT(t, 3)).transpose());
+      };
       for (int t = 0; t < TT.rows(); ++t) {
-        const double v0 = tet_volume(R.row(TT(t, 0)).transpose(), R.row(TT(t, 1)).transpose(), R.row(TT(t, 2)).transpose(), R.row(TT(t, 3)).transpose());
-        const double v1 = tet_volume(X.row(TT(t, 0)).transpose(), X.row(TT(t, 1)).transpose(), X.row(TT(t, 2)).transpose(), X.row(TT(t, 3)).transpose());
-        if (!(v1 * v0 > 0))
+        if (!(volume(R, t) * volume(X, t) > 0))
           for (int j = 0; j < 4; ++j) at[TT(t, j)] = 1;
       }
       for (int f = 0; f < B.rows(); ++f)
