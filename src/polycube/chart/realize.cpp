@@ -360,7 +360,8 @@ class Realizer {
     inverted = count_inverted(X, T_, arap_rest_);
     int sweep = 0, best = inverted, since_best = 0;
     for (; sweep < max_sweeps && inverted > 0 && since_best < 30; ++sweep) {
-      // The region: vertices within `rings` of an inverted tet (recomputed every 10 sweeps).
+      // The region: vertices within `rings` of an inverted tet, found again every sweep (a sweep
+      // is 10 passes over it).
       std::vector<char> in(n, 0);
       std::vector<int> region;
       for (int t = 0; t < nt; ++t)
