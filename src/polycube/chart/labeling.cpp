@@ -133,16 +133,23 @@ int straighten(const MatX3i& N, std::vector<int>& labels) {
   return changed;
 }
 
+// Per vertex: the charts of its triangles, each with how many of them it holds (its fan there).
+std::vector<std::vector<std::pair<int, int>>> vertex_charts(const MatX3i& F, const Charts& c, int nv) {
+  std::vector<std::vector<std::pair<int, int>>> vc(nv);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      auto& v = vc[F(f, k)];
+      auto it = std::find_if(v.begin(), v.end(), [&](const auto& p) { return p.first == c.of_face[f]; });
+      if (it == v.end()) v.emplace_back(c.of_face[f], 1);
+      else ++it->second;
+    }
+  return vc;
+}
+
 // Step 2: a triangle whose three vertices all touch one edge-adjacent chart of another axis.
 int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector<int>& labels) {
   const Charts c = build_charts(X, F, labels);
-  const int nv = static_cast<int>(X.rows());
-  std::vector<std::vector<int>> vcharts(nv);
-  for (int f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      auto& v = vcharts[F(f, k)];
-      if (std::find(v.begin(), v.end(), c.of_face[f]) == v.end()) v.push_back(c.of_face[f]);
-    }
+  const auto vcharts = vertex_charts(F, c, static_cast<int>(X.rows()));
   int changed = 0;
   for (int f = 0; f < F.rows(); ++f) {
     const int own = c.of_face[f];
@@ -154,7 +161,7 @@ int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vecto
       bool all = true;
       for (int j = 0; j < 3 && all; ++j) {
         const auto& v = vcharts[F(f, j)];
-        all = std::find(v.begin(), v.end(), other) != v.end();
+        all = std::any_of(v.begin(), v.end(), [&](const auto& p) { return p.first == other; });
       }
       if (all) {
         labels[f] = c.label[other];
@@ -173,21 +180,18 @@ int fix_degenerate(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vecto
 // most of its edge neighbours of other charts have.
 int fix_wide_fans(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector<int>& labels) {
   const Charts c = build_charts(X, F, labels);
-  const int nv = static_cast<int>(X.rows());
-  std::vector<std::vector<int>> vcharts(nv);
-  std::map<std::pair<int, int>, int> fan;  // (vertex, chart) -> triangles
-  for (int f = 0; f < F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) {
-      auto& v = vcharts[F(f, k)];
-      if (std::find(v.begin(), v.end(), c.of_face[f]) == v.end()) v.push_back(c.of_face[f]);
-      fan[{F(f, k), c.of_face[f]}]++;
-    }
+  const auto vcharts = vertex_charts(F, c, static_cast<int>(X.rows()));
+  auto fan = [&](int v, int chart) {
+    for (const auto& [ch, count] : vcharts[v])
+      if (ch == chart) return count;
+    return 0;
+  };
   const double wide = std::cos(150.0 * M_PI / 180.0);
   int changed = 0;
   for (int f = 0; f < F.rows(); ++f)
     for (int j = 0; j < 3; ++j) {
       const int v = F(f, j);
-      if (vcharts[v].size() < 2 || fan[{v, c.of_face[f]}] != 1) continue;
+      if (vcharts[v].size() < 2 || fan(v, c.of_face[f]) != 1) continue;
       const Vec3 a = (X.row(F(f, (j + 1) % 3)) - X.row(v)).transpose();
       const Vec3 b = (X.row(F(f, (j + 2) % 3)) - X.row(v)).transpose();
       if (!(a.dot(b) < wide * a.norm() * b.norm())) continue;
