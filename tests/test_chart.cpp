@@ -1,7 +1,10 @@
 // Chart labelling, cleanup and exact polycube realization on shapes with known answers.
+#include <map>
 #include <random>
+#include <set>
 
 #include "polycube/chart/extract.h"
+#include "polycube/core/topology.h"
 #include "polycube/deform/solver.h"
 #include "polycube/examples/examples.h"
 #include "polycube/validate/tetmesh.h"
@@ -373,4 +376,91 @@ TEST(Realize, AutoKeepsTheBetterOfTheTwoStartsRunSideBySide) {
   EXPECT_EQ(e.realized.start, names[best]);
   EXPECT_NEAR(e.realized.arap, arap[best], 1e-9 * arap[best]);
   EXPECT_LE((e.realized.X - X[best]).cwiseAbs().maxCoeff(), 1e-6);
+}
+
+namespace {
+
+std::set<std::array<int, 3>> sorted_faces(const MatX3i& B) {
+  std::set<std::array<int, 3>> out;
+  for (int f = 0; f < B.rows(); ++f) {
+    std::array<int, 3> a{B(f, 0), B(f, 1), B(f, 2)};
+    std::sort(a.begin(), a.end());
+    out.insert(a);
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
+  auto b = grid_box(4);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  auto labels = chart::label_by_normal(tm.V, tm.boundary);
+  // A boundary edge inside the top face, away from its border, whose collapse keeps every tet
+  // positive (on a flat face many would leave a tet with three collinear vertices: refused).
+  int keep = -1, drop = -1;
+  auto inner = [&](int w) {
+    const Vec3 p = tm.V.row(w);
+    return p.z() > 1 - 1e-12 && p.x() > 0.2 && p.x() < 0.8 && p.y() > 0.2 && p.y() < 0.8;
+  };
+  for (auto [u, v] : unique_edges(tm.boundary)) {
+    if (!inner(u) || !inner(v)) continue;
+    MatX4i T1 = tm.T;
+    MatX3i B1 = tm.boundary;
+    std::vector<int> L1 = labels;
+    std::string why;
+    if (chart::collapse_tet_edge(tm.V, tm.V, T1, B1, L1, u, v, &why)) {
+      keep = u, drop = v;
+      break;
+    }
+    EXPECT_EQ(why, "a tet would turn over at rest");
+  }
+  ASSERT_GE(keep, 0);
+  MatX4i T = tm.T;
+  MatX3i B = tm.boundary;
+  std::vector<int> L = labels;
+  // Not an edge of the boundary: refused, nothing changed.
+  int far = -1;
+  for (int v = 0; v < tm.V.rows() && far < 0; ++v)
+    if (tm.V(v, 2) < 1e-12 && (tm.V.row(v) - tm.V.row(keep)).norm() > 0.9) far = v;
+  ASSERT_GE(far, 0);
+  std::string why;
+  EXPECT_FALSE(chart::collapse_tet_edge(tm.V, tm.V, T, B, L, keep, far, &why));
+  EXPECT_EQ(why, "not an edge of the boundary");
+  EXPECT_EQ(T, tm.T);
+  EXPECT_EQ(B, tm.boundary);
+  // A deformed state in which the collapse would turn a tet over: refused.
+  MatX3d D = tm.V;
+  D.row(keep) += Eigen::RowVector3d(0, 0, -0.9);
+  EXPECT_FALSE(chart::collapse_tet_edge(tm.V, D, T, B, L, keep, drop, &why));
+  EXPECT_EQ(why, "a tet would turn over in the deformed mesh");
+  EXPECT_EQ(T, tm.T);
+  // The collapse itself.
+  int ring = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    bool hk = false, hd = false;
+    for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
+    ring += hk && hd;
+  }
+  ASSERT_TRUE(chart::collapse_tet_edge(tm.V, tm.V, T, B, L, keep, drop));
+  EXPECT_EQ(T.rows(), tm.T.rows() - ring);
+  EXPECT_EQ(B.rows(), tm.boundary.rows() - 2);
+  EXPECT_EQ(static_cast<int>(L.size()), B.rows());
+  for (int t = 0; t < T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) EXPECT_NE(T(t, j), drop);
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) EXPECT_NE(B(f, j), drop);
+  // Every tet positive, the tets' boundary is exactly B, still a closed surface of genus 0
+  // (Euler characteristic 2 over the referenced vertices), and the labels follow their triangles.
+  const auto q = measure_tets(tm.V, T);
+  EXPECT_EQ(q.inverted, 0);
+  EXPECT_EQ(q.zero_volume, 0);
+  EXPECT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
+  std::set<int> used;
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) used.insert(B(f, j));
+  const int edges = static_cast<int>(unique_edges(B).size());
+  EXPECT_EQ(static_cast<int>(used.size()) - edges + static_cast<int>(B.rows()), 2);
+  const auto relabelled = chart::label_by_normal(tm.V, B);
+  EXPECT_EQ(relabelled, L);
 }

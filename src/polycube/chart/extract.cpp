@@ -1,6 +1,7 @@
 #include "polycube/chart/extract.h"
 
 #include <algorithm>
+#include <string>
 #include <map>
 #include <set>
 #include <tuple>
@@ -99,6 +100,132 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     } else if (collapses > 0) {
       e.realized.failure += " (after " + std::to_string(flips) + " edge flips and " + std::to_string(collapses) +
                             " edge collapses: " + std::to_string(r.misoriented_faces) + " still folded)";
+    }
+  };
+  // Tet mode: a realization that leaves a few tets inverted where it pins two boundary vertices
+  // joined by a boundary edge to one point (spot: a chart-border vertex 1.8e-4 from the corner of
+  // its own polycube edge in the deformed mesh, pressed onto it) has no room for the tets between
+  // them. The edge is collapsed (collapse_tet_edge: the slim-triangle collapse of Section 4, on
+  // the rest and deformed meshes alike) and the polycube realized again, a few rounds. The
+  // realization runs on the mesh without the merged vertices; its result is given back in the
+  // input's numbering, each merged vertex on its partner.
+  auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
+                             const std::vector<int>& merged, const RealizeOptions& ro) {
+    const int n = static_cast<int>(rest.rows());
+    std::vector<int> o2n(n, -1), n2o;
+    for (int v = 0; v < n; ++v)
+      if (merged[v] < 0) {
+        o2n[v] = static_cast<int>(n2o.size());
+        n2o.push_back(v);
+      }
+    const int m = static_cast<int>(n2o.size());
+    MatX3d R(m, 3), D(m, 3);
+    for (int i = 0; i < m; ++i) {
+      R.row(i) = rest.row(n2o[i]);
+      D.row(i) = deformed.row(n2o[i]);
+    }
+    MatX4i TT = CT;
+    for (int t = 0; t < TT.rows(); ++t)
+      for (int j = 0; j < 4; ++j) TT(t, j) = o2n[CT(t, j)];
+    MatX3i BB = CB;
+    for (int f = 0; f < BB.rows(); ++f)
+      for (int j = 0; j < 3; ++j) BB(f, j) = o2n[CB(f, j)];
+    RealizeResult r = realize_polycube(R, TT, BB, D, CL, ro, hooks);
+    auto back = [&](int i) { return i < m ? n2o[i] : n + (i - m); };
+    auto root = [&](int v) {
+      while (merged[v] >= 0) v = merged[v];
+      return v;
+    };
+    auto expand = [&](MatX3d& P, const MatX3d& dropped_at) {
+      if (P.rows() < m) return;
+      MatX3d full(n + (P.rows() - m), 3);
+      for (int i = 0; i < P.rows(); ++i) full.row(back(i)) = P.row(i);
+      for (int v = 0; v < n; ++v)
+        if (merged[v] >= 0) {
+          if (dropped_at.rows() > 0) full.row(v) = dropped_at.row(v);
+          else full.row(v) = full.row(root(v)).eval();
+        }
+      P = std::move(full);
+    };
+    expand(r.X, MatX3d());
+    expand(r.rest, rest);
+    for (int t = 0; t < r.T.rows(); ++t)
+      for (int j = 0; j < 4; ++j) r.T(t, j) = back(r.T(t, j));
+    return r;
+  };
+  auto repair_tets = [&] {
+    MatX4i CT = T;
+    MatX3i CB = B;
+    std::vector<int> CL = e.labels;
+    std::vector<int> merged(rest.rows(), -1);
+    RealizeResult r = e.realized;
+    int collapses = 0;
+    const int n = static_cast<int>(rest.rows());
+    for (int round = 0; round < opt.tet_collapse_rounds; ++round) {
+      if (r.success || r.inverted == 0 || r.inverted > opt.max_relabel_inverted || r.X.rows() == 0 ||
+          r.T.rows() == 0)
+        break;
+      const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+      const auto bedges = unique_edges(CB);
+      auto volume = [&](const MatX3d& P, int t) {
+        return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
+                          P.row(r.T(t, 3)).transpose());
+      };
+      std::vector<std::pair<int, int>> cand;
+      for (int t = 0; t < r.T.rows(); ++t) {
+        if (volume(r.rest, t) * volume(r.X, t) > 0) continue;
+        for (int a = 0; a < 4; ++a)
+          for (int b = a + 1; b < 4; ++b) {
+            const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
+            if (v >= n || (r.X.row(u) - r.X.row(v)).norm() > 1e-6 * diag) continue;
+            if (std::binary_search(bedges.begin(), bedges.end(), std::make_pair(u, v))) cand.emplace_back(u, v);
+          }
+      }
+      std::sort(cand.begin(), cand.end());
+      cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+      // The vertex on more charts (the corner) is kept.
+      std::vector<std::vector<int>> vlabels(n);
+      for (int f = 0; f < CB.rows(); ++f)
+        for (int j = 0; j < 3; ++j) {
+          auto& l = vlabels[CB(f, j)];
+          if (std::find(l.begin(), l.end(), CL[f]) == l.end()) l.push_back(CL[f]);
+        }
+      std::vector<char> touched(n, 0);
+      int made = 0;
+      for (auto [u, v] : cand) {
+        if (touched[u] || touched[v]) continue;
+        const bool keep_u = vlabels[u].size() >= vlabels[v].size();
+        const int keep = keep_u ? u : v, drop = keep_u ? v : u;
+        std::string why;
+        if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why)) {
+          hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
+                      " has both ends at one point of the polycube but cannot be collapsed: " + why);
+          continue;
+        }
+        merged[drop] = keep;
+        touched[u] = touched[v] = 1;
+        ++made;
+        hooks.debug("collapsed boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
+                    ": the polycube put both ends at one point");
+      }
+      if (made == 0) break;
+      collapses += made;
+      RealizeOptions ro = opt.realize;
+      if (ro.start == "auto" && r.start == "continuation") ro.start = "continuation";
+      r = realize_compact(CT, CB, CL, merged, ro);
+      hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
+                  (r.success ? std::string("success") : r.failure));
+    }
+    if (collapses == 0) return;
+    if (r.success) {
+      e.realized = std::move(r);
+      e.map_B = std::move(CB);
+      e.map_labels = std::move(CL);
+      e.edge_collapses = collapses;
+      e.charts = check_charts(e.map_B, n, e.map_labels);
+    } else {
+      e.realized.failure += " (" + std::to_string(collapses) + " boundary edges whose ends it pinned to one point " +
+                            "collapsed: still no valid polycube)";
     }
   };
   // Surface mode: flips and collapses first (the relabelling below mostly comes back to the same
@@ -211,6 +338,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     retried = true;
   }
   if (T.rows() == 0 && retried) repair_surface();
+  if (T.rows() > 0 && !e.realized.success) repair_tets();
   return e;
 }
 
@@ -362,6 +490,144 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
   F = std::move(F2);
   labels = std::move(l2);
   return collapses;
+}
+
+}  // namespace polycube::chart
+
+namespace polycube::chart {
+
+bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
+                       int keep, int drop, std::string* why) {
+  auto refuse = [&](const char* reason) {
+    if (why) *why = reason;
+    return false;
+  };
+  if (keep == drop) return refuse("the same vertex");
+  auto has = [](auto row, int v) {
+    for (int j = 0; j < row.size(); ++j)
+      if (row[j] == v) return true;
+    return false;
+  };
+  // Boundary: the edge's two triangles go, the others of `drop` move to `keep`.
+  std::vector<int> gone_faces, moved_faces, keep_faces;
+  for (int f = 0; f < B.rows(); ++f) {
+    const bool hk = has(B.row(f), keep), hd = has(B.row(f), drop);
+    if (hk && hd) gone_faces.push_back(f);
+    else if (hd) moved_faces.push_back(f);
+    else if (hk) keep_faces.push_back(f);
+  }
+  if (gone_faces.size() != 2) return refuse("not an edge of the boundary");
+  std::vector<int> gone_tets, star;  // star: the tets of `keep` after the collapse
+  for (int t = 0; t < T.rows(); ++t) {
+    const bool hk = has(T.row(t), keep), hd = has(T.row(t), drop);
+    if (hk && hd) gone_tets.push_back(t);
+    else if (hk || hd) star.push_back(t);
+  }
+  if (gone_tets.empty()) return refuse("not an edge of the tets");
+  auto tet_after = [&](int t) {
+    std::array<int, 4> q{T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    for (int& v : q)
+      if (v == drop) v = keep;
+    return q;
+  };
+  // Positive at rest and deformed (oriented as the tet was at rest).
+  auto volume = [](const MatX3d& P, const std::array<int, 4>& q) {
+    return tet_volume(P.row(q[0]).transpose(), P.row(q[1]).transpose(), P.row(q[2]).transpose(),
+                      P.row(q[3]).transpose());
+  };
+  for (int t : star) {
+    const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
+    const auto q = tet_after(t);
+    if (!(sign * volume(rest, q) > 0)) return refuse("a tet would turn over at rest");
+    if (!(sign * volume(deformed, q) > 0)) return refuse("a tet would turn over in the deformed mesh");
+  }
+  // Link of `keep`: the triangle opposite it in each star tet.
+  std::map<std::pair<int, int>, int> edge_count;
+  std::map<int, std::vector<std::array<int, 3>>> around;  // link vertex -> link triangles at it
+  std::set<std::array<int, 3>> tris;
+  int nlt = 0;
+  for (int t : star) {
+    const auto q = tet_after(t);
+    std::array<int, 3> o{};
+    int m = 0;
+    for (int v : q)
+      if (v != keep) o[m++] = v;
+    if (m != 3) return refuse("a tet would keep both ends");
+    std::array<int, 3> s = o;
+    std::sort(s.begin(), s.end());
+    if (!tris.insert(s).second) return refuse("two tets would coincide");
+    ++nlt;
+    for (int a = 0; a < 3; ++a) {
+      const int u = s[a], v = s[(a + 1) % 3];
+      edge_count[{std::min(u, v), std::max(u, v)}]++;
+      around[s[a]].push_back(s);
+    }
+  }
+  // Its border edges must be the edges opposite `keep` in the boundary triangles around it.
+  std::set<std::pair<int, int>> border, expected;
+  for (const auto& [e, c] : edge_count) {
+    if (c > 2) return refuse("a face would be shared by three tets");
+    if (c == 1) border.insert(e);
+  }
+  for (const std::vector<int>* list : {&moved_faces, &keep_faces})
+    for (int f : *list) {
+      std::array<int, 3> q{B(f, 0), B(f, 1), B(f, 2)};
+      int o[2], m = 0;
+      for (int v : q)
+        if (v != keep && v != drop) o[m++] = v;
+      if (m != 2) return refuse("a boundary triangle would keep both ends");
+      if (!expected.insert({std::min(o[0], o[1]), std::max(o[0], o[1])}).second)
+        return refuse("two boundary triangles would coincide");
+    }
+  if (border != expected) return refuse("the boundary would not match the tets (link condition)");
+  // A disk: connected, Euler characteristic 1, and a manifold at each vertex (the link
+  // triangles at a vertex are one fan).
+  const int nle = static_cast<int>(edge_count.size());
+  const int nlv = static_cast<int>(around.size());
+  if (nlv - nle + nlt != 1) return refuse("the star of the kept vertex would not be a ball (link condition)");
+  {
+    std::map<std::array<int, 3>, int> id;
+    for (const auto& s : tris) id.emplace(s, static_cast<int>(id.size()));
+    UnionFind all(id.size());
+    for (const auto& [v, list] : around) {
+      UnionFind fan(list.size());
+      for (size_t i = 0; i < list.size(); ++i)
+        for (size_t j = i + 1; j < list.size(); ++j) {
+          int shared = 0;
+          for (int a : list[i])
+            for (int b : list[j]) shared += a == b;
+          if (shared == 2) {
+            fan.unite(static_cast<int>(i), static_cast<int>(j));
+            all.unite(id[list[i]], id[list[j]]);
+          }
+        }
+      int roots = 0;
+      for (size_t i = 0; i < list.size(); ++i) roots += fan.find(static_cast<int>(i)) == static_cast<int>(i);
+      if (roots != 1) return refuse("the star of the kept vertex would be pinched (link condition)");
+    }
+    int roots = 0;
+    for (size_t i = 0; i < id.size(); ++i) roots += all.find(static_cast<int>(i)) == static_cast<int>(i);
+    if (roots != 1) return refuse("the star of the kept vertex would fall apart (link condition)");
+  }
+  // Apply.
+  for (int t : star)
+    for (int j = 0; j < 4; ++j)
+      if (T(t, j) == drop) T(t, j) = keep;
+  for (int f : moved_faces)
+    for (int j = 0; j < 3; ++j)
+      if (B(f, j) == drop) B(f, j) = keep;
+  auto remove_rows = [](auto& M, const std::vector<int>& rows) {
+    std::vector<char> gone(M.rows(), 0);
+    for (int r : rows) gone[r] = 1;
+    int w = 0;
+    for (int r = 0; r < M.rows(); ++r)
+      if (!gone[r]) M.row(w++) = M.row(r);
+    M.conservativeResize(w, Eigen::NoChange);
+  };
+  remove_rows(T, gone_tets);
+  remove_rows(B, gone_faces);
+  for (int i = static_cast<int>(gone_faces.size()) - 1; i >= 0; --i) labels.erase(labels.begin() + gone_faces[i]);
+  return true;
 }
 
 }  // namespace polycube::chart

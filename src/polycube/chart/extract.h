@@ -1,6 +1,7 @@
 // The polycube stage as one call: label the deformed boundary, clean the labels up, check the
 // chart graph, realize the exact polycube (labeling.h, realize.h).
 #pragma once
+#include <string>
 #include <vector>
 
 #include "polycube/chart/labeling.h"
@@ -27,6 +28,10 @@ struct ExtractOptions {
   /// local folds of the labelling; a realization that failed wholesale is not patched up).
   int max_relabel_inverted = 200;
   int max_relabel_faces = 100;
+  /// Tet mode: when the realization (after the relabelling) still leaves tets inverted where it
+  /// pins the two ends of a boundary edge to one point, that edge is collapsed (collapse_tet_edge)
+  /// and the polycube realized again, at most this many rounds; 0 = off.
+  int tet_collapse_rounds = 3;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };
@@ -45,6 +50,9 @@ struct PolycubeExtraction {
   MatX3i map_B;
   std::vector<int> map_labels;
   int edge_flips = 0;
+  /// Surface mode: collapses of folded triangles' edges; tet mode: boundary edges collapsed because
+  /// the realization pinned their ends to one point (collapse_tet_edge); map_B / map_labels then hold
+  /// the boundary without their triangles, and the merged vertex sits on its partner in realized.X.
   int edge_collapses = 0;
   /// The map's triangles and their labels: map_B / map_labels when repaired, else B / labels.
   const MatX3i& map_triangles(const MatX3i& B) const { return map_B.rows() > 0 ? map_B : B; }
@@ -69,5 +77,16 @@ int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels
 /// the collapses made.
 int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::vector<int>& labels,
                           std::vector<int>& merged_into);
+
+/// Tet mode: collapses the boundary edge (keep, drop) of the tet mesh (T over rest, boundary B with
+/// one label per row): the tets holding both go, `drop` is replaced by `keep` in the others, and B and
+/// labels lose the edge's two triangles; `drop` is then referenced by nothing. Refused (false, nothing
+/// changed) unless (keep, drop) is an edge of B, the star of `keep` stays a ball with `keep` on its
+/// surface (the triangles opposite `keep` form a disk, a manifold at each of its vertices, bounded
+/// by the boundary triangles around `keep`) and every tet of the new star is positive at rest and in
+/// `deformed`. This is the tet mesh's form of the slim-triangle collapse of Huang et al. 2014
+/// (Section 4): two boundary vertices the polycube pins to one point. why: the reason of a refusal.
+bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
+                       int keep, int drop, std::string* why = nullptr);
 
 }  // namespace polycube::chart

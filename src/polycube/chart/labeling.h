@@ -20,7 +20,7 @@
 // (vertex where 3+ charts meet) of valence 3; every chart a planar region: a disk, or (on shapes
 // of genus > 0) a disk with holes such as the top face of a box with a through-hole, whose faces
 // are annuli; every chart boundary loop with at least 4 corners (a face of a polycube is a
-// rectilinear polygon).
+// rectilinear polygon); no two corners on the same three planes (they would coincide).
 #pragma once
 #include <string>
 #include <vector>
@@ -102,6 +102,9 @@ struct ChartReport {
   int non_disk_charts = 0;     ///< charts that are not disks (holes allowed, see header)
   int invalid_topology_charts = 0;  ///< charts with handles (never a polycube face)
   int loops_with_few_corners = 0;   ///< chart boundary loops with fewer than 4 corners
+  /// pairs of corners on the same three planes (charts of one axis that meet share a plane), which
+  /// the polycube would put at one point
+  int coincident_corners = 0;
   bool valid = false;          ///< none of the problems above except non-disk planar charts
   std::vector<std::string> problems;  ///< the first problems found, each naming charts/vertices
 };

@@ -5,6 +5,7 @@
 #include <Eigen/SVD>
 #include <Eigen/Sparse>
 #include <algorithm>
+#include <sstream>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -1126,6 +1127,35 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       r.T = T;
       r.inverted = least->inverted;
       check_faces(B, labels, r);
+      if (r.inverted > 0 && r.inverted <= 3 && hooks.log) {
+        // What surrounds the last inverted tets: their boundary vertices' planes and triangles.
+        std::ostringstream os;
+        os.precision(4);
+        std::vector<std::vector<int>> vf(n);
+        for (int f = 0; f < B.rows(); ++f)
+          for (int j = 0; j < 3; ++j) vf[B(f, j)].push_back(f);
+        for (int t = 0; t < r.T.rows(); ++t) {
+          Eigen::Matrix3d D;
+          for (int j = 0; j < 3; ++j) D.col(j) = (r.X.row(r.T(t, j + 1)) - r.X.row(r.T(t, 0))).transpose();
+          if (D.determinant() > 0) continue;
+          os << "inverted tet " << t << ":";
+          for (int j = 0; j < 4; ++j) {
+            const int v = r.T(t, j);
+            os << "\n  vertex " << v << " at (" << r.X.row(v) << ") deformed (" << (v < deformed.rows() ? Vec3(deformed.row(v)) : Vec3::Zero()).transpose() << ")";
+            if (v >= static_cast<int>(vf.size())) continue;
+            for (int f : vf[v]) {
+              const Vec3 a = r.X.row(B(f, 0)), b = r.X.row(B(f, 1)), c = r.X.row(B(f, 2));
+              const Vec3 da = deformed.row(B(f, 0)), db = deformed.row(B(f, 1)), dc = deformed.row(B(f, 2));
+              const Vec3 nx = (b - a).cross(c - a), nd = (db - da).cross(dc - da);
+              os << "\n    tri " << f << " (" << B(f, 0) << " " << B(f, 1) << " " << B(f, 2) << ") chart " << charts.of_face[f]
+                 << " " << label_name(labels[f]) << " n_polycube (" << nx.normalized().transpose() << ") area " << 0.5 * nx.norm()
+                 << " n_deformed (" << nd.normalized().transpose() << ") area " << 0.5 * nd.norm();
+            }
+          }
+          os << "\n";
+        }
+        hooks.debug(os.str());
+      }
     }
     return fail(failures);
   }

@@ -500,6 +500,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                            {"non_disk_charts", ex.charts.non_disk_charts},
                            {"invalid_topology_charts", ex.charts.invalid_topology_charts},
                            {"loops_with_few_corners", ex.charts.loops_with_few_corners},
+                           {"coincident_corners", ex.charts.coincident_corners},
                            {"problems", ex.charts.problems}};
       pj["realization"] = {{"success", rr.success},
                            {"start", rr.start},
@@ -515,10 +516,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
-      if (opt.surface) {
-        pj["edge_flips"] = ex.edge_flips;
-        pj["edge_collapses"] = ex.edge_collapses;
-      }
+      if (opt.surface) pj["edge_flips"] = ex.edge_flips;
+      pj["edge_collapses"] = ex.edge_collapses;
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
       if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
@@ -676,7 +675,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.report("hex", 0);
         hooks.info("extracting hexes");
         const hex::HexResult hr =
-            hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, opt.hex, hooks);
+            hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, opt.hex, hooks);
         if (hr.quality.inverted > 0) {
           std::string why = "; try more hexes (--hexes)";
           if (hr.min_slab_ratio < 0.05)
@@ -753,7 +752,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         ho.smooth_iterations = 0;
         bool report_grid_optimized = false;
         if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
-        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
+        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
         quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
         if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
           // Grid faces straddling a sharp edge the polycube has no edge along can fold when
@@ -761,7 +760,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           // and its features) and take its boundary.
           hooks.info(std::to_string(qr.quality.inverted) + " quads fold on the projected grid; optimizing the grid first");
           ho.smooth_iterations = opt.hex.smooth_iterations;
-          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, B, ex.labels, &surface, ho, hooks);
+          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
           qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
           report_grid_optimized = true;
         }
