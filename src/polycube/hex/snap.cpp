@@ -160,6 +160,11 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
   }
   Eigen::SparseMatrix<double> K(nv, nv);
   K.setFromTriplets(trip.begin(), trip.end());
+  // Vertices of no tet (merged into a neighbour by an edge collapse) have no Laplacian row: they
+  // keep a zero displacement.
+  std::vector<char> in_tet(nv, 0);
+  for (int t = 0; t < T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) in_tet[T(t, j)] = 1;
 
   // Charts: edge-connected triangles of one label.
   std::vector<int> chart(B.rows());
@@ -209,7 +214,7 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
     int nf = 0;
     for (int v = 0; v < nv; ++v) {
       if (vplane[v] >= 0) d[v] = n[vplane[v]] - s * (h[vplane[v]] - h[0]);
-      else free_id[v] = nf++;
+      else if (in_tet[v]) free_id[v] = nf++;
     }
     if (nf > 0 && d.cwiseAbs().maxCoeff() > 0) {
       std::vector<Eigen::Triplet<double>> ff;
