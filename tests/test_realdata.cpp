@@ -1,7 +1,11 @@
 // Real meshes from ../shared/meshes (public data, never copied into the repository): each one
 // loads and tetrahedralizes with no inverted tet, or is refused with the expected message.
 // Skips with a message when ../shared is absent (set POLYCUBE_SHARED to use another copy).
+#include <array>
+#include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 
 #include "polycube/core/error.h"
 #include "polycube/pipeline/pipeline.h"
@@ -120,6 +124,42 @@ TEST_P(RealPolycube, ReachesAnExactPolycubeAndAValidHexMesh) {
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
                          ::testing::Values("tet/mambo_B0.mesh", "basic/eight.off", "basic/torus.obj"), test_name);
+
+// An organic shape whose realization needs the collapse of a pinned boundary edge (spot, 17k tets:
+// a chart-border vertex 1.8e-4 from the corner of its own polycube edge, on the wrong side): an
+// exact polycube with a valid chart graph, no inverted tet, the collapse reported, and the map of
+// every input vertex in it (the merged vertex on its partner). About 3 minutes on 2 cores.
+TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
+  const std::string path = shared_dir() + "/meshes/organic/spot.obj";
+  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir("real_polycube_spot");
+  opt.until = Stage::Polycube;
+  nlohmann::json j = run_pipeline(opt);
+  const auto& p = j["polycube"];
+  EXPECT_EQ(p["inverted_tets"], 0);
+  EXPECT_EQ(p["planarity_error"], 0.0);
+  EXPECT_EQ(p["misoriented_faces"], 0);
+  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
+  EXPECT_GE(p["edge_collapses"].get<int>(), 1);
+  EXPECT_LT(p["arap_distortion"].get<double>(), 0.15);
+  const std::array<int, 3> overlap = p["self_overlap_lines"].get<std::array<int, 3>>();
+  EXPECT_EQ(overlap[0] + overlap[1] + overlap[2], 0);
+  // map.obj: one polycube position per input vertex, all finite.
+  std::ifstream map(fs::path(opt.out_dir) / "map.obj");
+  ASSERT_TRUE(map.good());
+  int vertices = 0;
+  for (std::string line; std::getline(map, line);)
+    if (line.rfind("v ", 0) == 0) {
+      std::istringstream is(line.substr(2));
+      double x = NAN, y = NAN, z = NAN;
+      is >> x >> y >> z;
+      EXPECT_TRUE(std::isfinite(x) && std::isfinite(y) && std::isfinite(z)) << line;
+      ++vertices;
+    }
+  EXPECT_EQ(vertices, j["input"]["vertices"].get<int>());
+}
 
 // tet/hand.mesh (30.9k tets after the split of boundary tets) has slivers that the full SQP step
 // flattens: with the volume barrier weighted by rest volume alone the line search is cut short at

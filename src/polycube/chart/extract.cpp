@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <string>
 #include <map>
+#include <numeric>
 #include <set>
 #include <tuple>
 
@@ -153,80 +154,86 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       for (int j = 0; j < 4; ++j) r.T(t, j) = back(r.T(t, j));
     return r;
   };
-  auto repair_tets = [&] {
-    MatX4i CT = T;
-    MatX3i CB = B;
-    std::vector<int> CL = e.labels;
-    std::vector<int> merged(rest.rows(), -1);
-    RealizeResult r = e.realized;
-    int collapses = 0;
+  // The tet-mode retries work on the current mesh: B and T less the collapsed edges (CB, CT), the
+  // labels of CB's rows (CL), the row of B of each row of CB, and the vertex each merged one went into.
+  MatX4i CT = T;
+  MatX3i CB = B;
+  std::vector<int> CL = e.labels;
+  std::vector<int> cb_row(B.rows());
+  std::iota(cb_row.begin(), cb_row.end(), 0);
+  std::vector<int> merged(rest.rows(), -1);
+  int collapses = 0, collapse_rounds = 0;
+  auto realize_current = [&](const RealizeOptions& ro) {
+    return collapses == 0 ? realize_polycube(rest, T, B, deformed, CL, ro, hooks)
+                          : realize_compact(CT, CB, CL, merged, ro);
+  };
+  // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
+  // point (where admissible); returns how many.
+  auto try_collapse = [&]() -> int {
+    const RealizeResult& r = e.realized;
+    if (T.rows() == 0 || r.success || r.inverted == 0 || r.inverted > opt.max_relabel_inverted || r.X.rows() == 0 ||
+        r.T.rows() == 0 || collapse_rounds >= opt.tet_collapse_rounds)
+      return 0;
     const int n = static_cast<int>(rest.rows());
-    for (int round = 0; round < opt.tet_collapse_rounds; ++round) {
-      if (r.success || r.inverted == 0 || r.inverted > opt.max_relabel_inverted || r.X.rows() == 0 ||
-          r.T.rows() == 0)
-        break;
-      const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
-      const auto bedges = unique_edges(CB);
-      auto volume = [&](const MatX3d& P, int t) {
-        return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
-                          P.row(r.T(t, 3)).transpose());
-      };
-      std::vector<std::pair<int, int>> cand;
-      for (int t = 0; t < r.T.rows(); ++t) {
-        if (volume(r.rest, t) * volume(r.X, t) > 0) continue;
-        for (int a = 0; a < 4; ++a)
-          for (int b = a + 1; b < 4; ++b) {
-            const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
-            if (v >= n || (r.X.row(u) - r.X.row(v)).norm() > 1e-6 * diag) continue;
-            if (std::binary_search(bedges.begin(), bedges.end(), std::make_pair(u, v))) cand.emplace_back(u, v);
-          }
-      }
-      std::sort(cand.begin(), cand.end());
-      cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
-      // The vertex on more charts (the corner) is kept.
-      std::vector<std::vector<int>> vlabels(n);
-      for (int f = 0; f < CB.rows(); ++f)
-        for (int j = 0; j < 3; ++j) {
-          auto& l = vlabels[CB(f, j)];
-          if (std::find(l.begin(), l.end(), CL[f]) == l.end()) l.push_back(CL[f]);
+    const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+    const auto bedges = unique_edges(CB);
+    auto volume = [&](const MatX3d& P, int t) {
+      return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
+                        P.row(r.T(t, 3)).transpose());
+    };
+    std::vector<std::pair<int, int>> cand;
+    for (int t = 0; t < r.T.rows(); ++t) {
+      if (volume(r.rest, t) * volume(r.X, t) > 0) continue;
+      for (int a = 0; a < 4; ++a)
+        for (int b = a + 1; b < 4; ++b) {
+          const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
+          if (v >= n || (r.X.row(u) - r.X.row(v)).norm() > 1e-6 * diag) continue;
+          if (std::binary_search(bedges.begin(), bedges.end(), std::make_pair(u, v))) cand.emplace_back(u, v);
         }
-      std::vector<char> touched(n, 0);
-      int made = 0;
-      for (auto [u, v] : cand) {
-        if (touched[u] || touched[v]) continue;
-        const bool keep_u = vlabels[u].size() >= vlabels[v].size();
-        const int keep = keep_u ? u : v, drop = keep_u ? v : u;
-        std::string why;
-        if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why)) {
-          hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
-                      " has both ends at one point of the polycube but cannot be collapsed: " + why);
-          continue;
-        }
-        merged[drop] = keep;
-        touched[u] = touched[v] = 1;
-        ++made;
-        hooks.debug("collapsed boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
-                    ": the polycube put both ends at one point");
+    }
+    std::sort(cand.begin(), cand.end());
+    cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
+    if (cand.empty()) return 0;
+    // The vertex on more charts (the corner) is kept.
+    std::vector<std::vector<int>> vlabels(n);
+    for (int f = 0; f < CB.rows(); ++f)
+      for (int j = 0; j < 3; ++j) {
+        auto& l = vlabels[CB(f, j)];
+        if (std::find(l.begin(), l.end(), CL[f]) == l.end()) l.push_back(CL[f]);
       }
-      if (made == 0) break;
+    std::vector<char> touched(n, 0);
+    int made = 0;
+    for (auto [u, v] : cand) {
+      if (touched[u] || touched[v]) continue;
+      const bool keep_u = vlabels[u].size() >= vlabels[v].size();
+      const int keep = keep_u ? u : v, drop = keep_u ? v : u;
+      std::vector<int> rows;  // the rows of CB the collapse removes
+      for (int f = 0; f < CB.rows(); ++f) {
+        int hits = 0;
+        for (int j = 0; j < 3; ++j) hits += CB(f, j) == keep || CB(f, j) == drop;
+        if (hits == 2) rows.push_back(f);
+      }
+      std::string why;
+      if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why)) {
+        hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
+                    " has both ends at one point of the polycube but cannot be collapsed: " + why);
+        continue;
+      }
+      for (int i = static_cast<int>(rows.size()) - 1; i >= 0; --i) cb_row.erase(cb_row.begin() + rows[i]);
+      merged[drop] = keep;
+      touched[u] = touched[v] = 1;
+      ++made;
+      hooks.debug("collapsed boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
+                  ": the polycube put both ends at one point");
+    }
+    if (made > 0) {
+      ++collapse_rounds;
       collapses += made;
-      RealizeOptions ro = opt.realize;
-      if (ro.start == "auto" && r.start == "continuation") ro.start = "continuation";
-      r = realize_compact(CT, CB, CL, merged, ro);
-      hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
-                  (r.success ? std::string("success") : r.failure));
     }
-    if (collapses == 0) return;
-    if (r.success) {
-      e.realized = std::move(r);
-      e.map_B = std::move(CB);
-      e.map_labels = std::move(CL);
-      e.edge_collapses = collapses;
-      e.charts = check_charts(e.map_B, n, e.map_labels);
-    } else {
-      e.realized.failure += " (" + std::to_string(collapses) + " boundary edges whose ends it pinned to one point " +
-                            "collapsed: still no valid polycube)";
-    }
+    return made;
+  };
+  auto sync_labels = [&] {
+    for (size_t i = 0; i < cb_row.size(); ++i) e.labels[cb_row[i]] = CL[i];
   };
   // Surface mode: flips and collapses first (the relabelling below mostly comes back to the same
   // folds there, at the cost of a realization per attempt).
@@ -236,7 +243,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // their plane: those triangles sit where their chart cannot reach (typically a chart border
   // that folds back). They take the most frequent other label of their edge neighbours, the
   // labels are cleaned again, and the realization is retried.
-  const MatX3i N = face_adjacency(B);
+  MatX3i N = face_adjacency(B);
   bool widen = false;
   // A realization that could not untangle every tet comes back with the state it reached: where a
   // few tets stay inverted, boundary triangles there face the wrong way too (a chart border that
@@ -248,19 +255,31 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                           e.realized.misoriented_faces <= opt.max_relabel_faces)) &&
                         (e.realized.misoriented_faces > 0 || e.realized.inverted > 0) && e.realized.X.rows() > 0;
        ++attempt) {
+    // Tet mode: edges whose ends the realization pinned to one point are collapsed first (a
+    // relabelling cannot give the tets between them room).
+    if (const int made = try_collapse(); made > 0) {
+      N = face_adjacency(CB);
+      RealizeOptions ro = opt.realize;
+      if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
+      e.realized = realize_current(ro);
+      hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
+                  (e.realized.success ? std::string("success") : e.realized.failure));
+      --attempt;
+      continue;
+    }
     const MatX3d& X = e.realized.X;
     const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
     // Misoriented triangles, relabelled by fronts from the others: each takes the most frequent
     // label, other than its own, of its settled neighbours (a folded strip is relabelled whole).
-    std::vector<char> bad(B.rows(), 0);
+    std::vector<char> bad(CB.rows(), 0);
     int nbad = 0;
-    for (int f = 0; f < B.rows(); ++f) {
-      const Vec3 a = X.row(B(f, 0)), b = X.row(B(f, 1)), c = X.row(B(f, 2));
-      if ((b - a).cross(c - a).dot(label_direction(e.labels[f])) > 1e-14 * diag * diag) continue;
+    for (int f = 0; f < CB.rows(); ++f) {
+      const Vec3 a = X.row(CB(f, 0)), b = X.row(CB(f, 1)), c = X.row(CB(f, 2));
+      if ((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag) continue;
       bad[f] = 1;
       ++nbad;
-      hooks.debug("misoriented triangle " + std::to_string(f) + " (" + std::to_string(B(f, 0)) + " " +
-                  std::to_string(B(f, 1)) + " " + std::to_string(B(f, 2)) + ") label " + label_name(e.labels[f]) +
+      hooks.debug("misoriented triangle " + std::to_string(cb_row[f]) + " (" + std::to_string(CB(f, 0)) + " " +
+                  std::to_string(CB(f, 1)) + " " + std::to_string(CB(f, 2)) + ") label " + label_name(CL[f]) +
                   ", area " + std::to_string(0.5 * (b - a).cross(c - a).norm()));
     }
     // Where the relabelling came to nothing (no misoriented triangle, or the cleanup undid it) and
@@ -279,21 +298,21 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         if (!(volume(R, t) * volume(X, t) > 0))
           for (int j = 0; j < 4; ++j) at[TT(t, j)] = 1;
       }
-      for (int f = 0; f < B.rows(); ++f)
-        if (!bad[f] && (at[B(f, 0)] || at[B(f, 1)] || at[B(f, 2)])) bad[f] = 1, ++nbad;
+      for (int f = 0; f < CB.rows(); ++f)
+        if (!bad[f] && (at[CB(f, 0)] || at[CB(f, 1)] || at[CB(f, 2)])) bad[f] = 1, ++nbad;
       hooks.debug("relabelling the " + std::to_string(nbad) + " triangles around the inverted tets");
     }
-    std::vector<int> next = e.labels;
+    std::vector<int> next = CL;
     int changed = 0;
     for (bool progress = true; progress;) {
       progress = false;
       std::vector<std::pair<int, int>> set;
-      for (int f = 0; f < B.rows(); ++f) {
+      for (int f = 0; f < CB.rows(); ++f) {
         if (bad[f] != 1) continue;
         int votes[6] = {0, 0, 0, 0, 0, 0};
         for (int k = 0; k < 3; ++k) {
           const int g = N(f, k);
-          if (g >= 0 && bad[g] != 1 && next[g] != e.labels[f]) votes[next[g]]++;
+          if (g >= 0 && bad[g] != 1 && next[g] != CL[f]) votes[next[g]]++;
         }
         const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
         if (votes[best] > 0) set.emplace_back(f, best);
@@ -305,8 +324,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         progress = true;
       }
     }
-    const CleanupStats again = changed > 0 ? cleanup_labels(deformed, B, next, opt.cleanup) : CleanupStats{};
-    if (next == e.labels) {
+    const CleanupStats again = changed > 0 ? cleanup_labels(deformed, CB, next, opt.cleanup) : CleanupStats{};
+    if (next == CL) {
       // Nothing changed, or the cleanup undid the relabelling (e.g. the triangles were zigzags).
       if (!widen && e.realized.inverted > 0) {
         widen = true;
@@ -316,7 +335,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       hooks.debug("relabelling the misoriented triangles is undone by the cleanup; no retry");
       break;
     }
-    e.labels = std::move(next);
+    CL = std::move(next);
+    sync_labels();
     e.cleanup.zigzags += again.zigzags;
     e.cleanup.degenerate += again.degenerate;
     e.cleanup.degree1 += again.degree1;
@@ -326,7 +346,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     e.cleanup.misoriented += changed;
     e.cleanup.relabelled_faces = 0;
     for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];
-    e.charts = check_charts(B, static_cast<int>(deformed.rows()), e.labels);
+    e.charts = check_charts(CB, static_cast<int>(deformed.rows()), CL);
     hooks.debug("retrying the realization with " + std::to_string(changed) +
                 " misoriented triangles relabelled: " + std::to_string(e.charts.charts) + " charts, " +
                 std::to_string(e.charts.corners) + " corners");
@@ -334,11 +354,31 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     // both starts were tried, the eq17 start mostly fails after a long untangling).
     RealizeOptions ro = opt.realize;
     if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
-    e.realized = realize_polycube(rest, T, B, deformed, e.labels, ro, hooks);
+    e.realized = realize_current(ro);
     retried = true;
   }
   if (T.rows() == 0 && retried) repair_surface();
-  if (T.rows() > 0 && !e.realized.success) repair_tets();
+  // Tet mode: the relabelling may end (or not start: too many misoriented triangles) in a state
+  // with pinned edges too.
+  while (try_collapse() > 0) {
+    RealizeOptions ro = opt.realize;
+    if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
+    e.realized = realize_current(ro);
+    hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
+                (e.realized.success ? std::string("success") : e.realized.failure));
+  }
+  if (collapses > 0) {
+    sync_labels();
+    e.edge_collapses = collapses;
+    if (e.realized.success) {
+      e.map_B = CB;
+      e.map_labels = CL;
+      e.charts = check_charts(CB, static_cast<int>(rest.rows()), CL);
+    } else {
+      e.realized.failure += " (after " + std::to_string(collapses) +
+                            " collapses of boundary edges whose ends it pinned to one point)";
+    }
+  }
   return e;
 }
 
