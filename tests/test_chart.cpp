@@ -442,7 +442,14 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
     for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
     ring += hk && hd;
   }
-  ASSERT_TRUE(chart::collapse_tet_edge(tm.V, tm.V, T, B, L, keep, drop));
+  std::vector<int> removed;
+  ASSERT_TRUE(chart::collapse_tet_edge(tm.V, tm.V, T, B, L, keep, drop, nullptr, &removed));
+  ASSERT_EQ(removed.size(), 2u);
+  for (int f : removed) {
+    int hits = 0;
+    for (int j = 0; j < 3; ++j) hits += tm.boundary(f, j) == keep || tm.boundary(f, j) == drop;
+    EXPECT_EQ(hits, 2) << "removed row " << f << " is not a triangle of the edge";
+  }
   EXPECT_EQ(T.rows(), tm.T.rows() - ring);
   EXPECT_EQ(B.rows(), tm.boundary.rows() - 2);
   EXPECT_EQ(static_cast<int>(L.size()), B.rows());

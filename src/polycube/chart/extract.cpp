@@ -1,10 +1,10 @@
 #include "polycube/chart/extract.h"
 
 #include <algorithm>
-#include <string>
 #include <map>
 #include <numeric>
 #include <set>
+#include <string>
 #include <tuple>
 
 #include "polycube/core/topology.h"
@@ -12,6 +12,22 @@
 #include "polycube/validate/tetmesh.h"
 
 namespace polycube::chart {
+
+namespace {
+
+// Tets of a realization's state (r.T over r.rest and r.X) that are not positive.
+std::vector<int> inverted_tets(const RealizeResult& r) {
+  auto volume = [&](const MatX3d& P, int t) {
+    return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
+                      P.row(r.T(t, 3)).transpose());
+  };
+  std::vector<int> out;
+  for (int t = 0; t < r.T.rows(); ++t)
+    if (!(volume(r.rest, t) * volume(r.X, t) > 0)) out.push_back(t);
+  return out;
+}
+
+}  // namespace
 
 PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
                                     const ExtractOptions& opt, const Hooks& hooks) {
@@ -177,13 +193,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     const int n = static_cast<int>(rest.rows());
     const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
     const auto bedges = unique_edges(CB);
-    auto volume = [&](const MatX3d& P, int t) {
-      return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
-                        P.row(r.T(t, 3)).transpose());
-    };
     std::vector<std::pair<int, int>> cand;
-    for (int t = 0; t < r.T.rows(); ++t) {
-      if (volume(r.rest, t) * volume(r.X, t) > 0) continue;
+    for (int t : inverted_tets(r)) {
       for (int a = 0; a < 4; ++a)
         for (int b = a + 1; b < 4; ++b) {
           const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
@@ -207,14 +218,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       if (touched[u] || touched[v]) continue;
       const bool keep_u = vlabels[u].size() >= vlabels[v].size();
       const int keep = keep_u ? u : v, drop = keep_u ? v : u;
-      std::vector<int> rows;  // the rows of CB the collapse removes
-      for (int f = 0; f < CB.rows(); ++f) {
-        int hits = 0;
-        for (int j = 0; j < 3; ++j) hits += CB(f, j) == keep || CB(f, j) == drop;
-        if (hits == 2) rows.push_back(f);
-      }
       std::string why;
-      if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why)) {
+      std::vector<int> rows;  // the rows of CB the collapse removes
+      if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why, &rows)) {
         hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
                     " has both ends at one point of the polycube but cannot be collapsed: " + why);
         continue;
@@ -287,17 +293,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     // there a border vertex is pressed onto a corner of its own polycube edge (spot: an edge of
     // zero length between two corners, the last tet left flat).
     if (widen && e.realized.inverted > 0 && e.realized.T.rows() > 0) {
-      const MatX3d& R = e.realized.rest;
-      const MatX4i& TT = e.realized.T;
       std::vector<char> at(X.rows(), 0);
-      auto volume = [&](const MatX3d& P, int t) {
-        return tet_volume(P.row(TT(t, 0)).transpose(), P.row(TT(t, 1)).transpose(), P.row(TT(t, 2)).transpose(),
-                          P.row(TT(t, 3)).transpose());
-      };
-      for (int t = 0; t < TT.rows(); ++t) {
-        if (!(volume(R, t) * volume(X, t) > 0))
-          for (int j = 0; j < 4; ++j) at[TT(t, j)] = 1;
-      }
+      for (int t : inverted_tets(e.realized))
+        for (int j = 0; j < 4; ++j) at[e.realized.T(t, j)] = 1;
       for (int f = 0; f < CB.rows(); ++f)
         if (!bad[f] && (at[CB(f, 0)] || at[CB(f, 1)] || at[CB(f, 2)])) bad[f] = 1, ++nbad;
       hooks.debug("relabelling the " + std::to_string(nbad) + " triangles around the inverted tets");
@@ -537,7 +535,7 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 namespace polycube::chart {
 
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
-                       int keep, int drop, std::string* why) {
+                       int keep, int drop, std::string* why, std::vector<int>* removed) {
   auto refuse = [&](const char* reason) {
     if (why) *why = reason;
     return false;
@@ -667,6 +665,7 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
   remove_rows(T, gone_tets);
   remove_rows(B, gone_faces);
   for (int i = static_cast<int>(gone_faces.size()) - 1; i >= 0; --i) labels.erase(labels.begin() + gone_faces[i]);
+  if (removed) *removed = gone_faces;
   return true;
 }
 

@@ -85,8 +85,9 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 /// surface (the triangles opposite `keep` form a disk, a manifold at each of its vertices, bounded
 /// by the boundary triangles around `keep`) and every tet of the new star is positive at rest and in
 /// `deformed`. This is the tet mesh's form of the slim-triangle collapse of Huang et al. 2014
-/// (Section 4): two boundary vertices the polycube pins to one point. why: the reason of a refusal.
+/// (Section 4): two boundary vertices the polycube pins to one point. why: the reason of a refusal;
+/// removed: the rows of B (before the call) that went, in increasing order.
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
-                       int keep, int drop, std::string* why = nullptr);
+                       int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr);
 
 }  // namespace polycube::chart
