@@ -378,29 +378,26 @@ ChartReport check_charts(const MatX3i& F, int nv, const std::vector<int>& labels
   // corner sits where its three charts' planes cross; two corners on the same three planes would
   // coincide (a chart edge of zero length, or the polycube touching itself there).
   {
-    std::vector<std::vector<int>> vcharts(nv);
-    for (int f = 0; f < F.rows(); ++f)
-      for (int k = 0; k < 3; ++k) {
-        auto& l = vcharts[F(f, k)];
-        if (std::find(l.begin(), l.end(), c.of_face[f]) == l.end()) l.push_back(c.of_face[f]);
-      }
+    const auto vcharts = vertex_charts(F, c, nv);
     UnionFind planes(c.count());
-    for (int v = 0; v < nv; ++v)
-      for (size_t a = 0; a < vcharts[v].size(); ++a)
-        for (size_t b = a + 1; b < vcharts[v].size(); ++b)
-          if (c.label[vcharts[v][a]] / 2 == c.label[vcharts[v][b]] / 2) planes.unite(vcharts[v][a], vcharts[v][b]);
+    for (const auto& around : vcharts)
+      for (size_t a = 0; a < around.size(); ++a)
+        for (size_t b = a + 1; b < around.size(); ++b)
+          if (axis_of(c.label[around[a].first]) == axis_of(c.label[around[b].first]))
+            planes.unite(around[a].first, around[b].first);
     std::map<std::array<int, 3>, int> seen;  // planes (x, y, z) -> first corner
     for (int v = 0; v < nv; ++v) {
       if (valence[v] != 3) continue;
       std::array<int, 3> key{-1, -1, -1};
-      for (int ch : vcharts[v]) key[c.label[ch] / 2] = planes.find(ch);
+      for (auto [ch, fan] : vcharts[v]) key[axis_of(c.label[ch])] = planes.find(ch);
       if (key[0] < 0 || key[1] < 0 || key[2] < 0) continue;
       auto [it, fresh] = seen.emplace(key, v);
       if (fresh) continue;
       r.coincident_corners++;
       add_problem(r, "corners " + std::to_string(it->second) + " and " + std::to_string(v) +
                          " lie on the same three planes (charts " + std::to_string(key[0]) + ", " +
-                         std::to_string(key[1]) + ", " + std::to_string(key[2]) + " and those they touch): the polycube would put them at one point");
+                         std::to_string(key[1]) + ", " + std::to_string(key[2]) +
+                         " and those they touch): the polycube would put them at one point");
     }
   }
 

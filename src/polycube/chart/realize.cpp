@@ -5,10 +5,10 @@
 #include <Eigen/SVD>
 #include <Eigen/Sparse>
 #include <algorithm>
-#include <sstream>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <sstream>
 #include <memory>
 #include <array>
 #include <initializer_list>
@@ -668,6 +668,43 @@ bool relax_eq17(const MatX3i& B, const MatX4i& T, const Planes& planes, MatX3d& 
   return X.allFinite();
 }
 
+// What surrounds the inverted tets of r (a debug message): their vertices in r.X and deformed, and
+// the boundary triangles there with chart, label and both normals.
+std::string describe_inverted(const RealizeResult& r, const MatX3i& B, const std::vector<int>& labels,
+                              const std::vector<int>& chart_of_face, const MatX3d& deformed) {
+  std::ostringstream os;
+  os.precision(4);
+  std::vector<std::vector<int>> vf(deformed.rows());
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) vf[B(f, j)].push_back(f);
+  auto normal = [&](const MatX3d& P, int f) {
+    return deform::area_normal(P, B(f, 0), B(f, 1), B(f, 2));
+  };
+  for (int t = 0; t < r.T.rows(); ++t) {
+    const double vr = tet_volume(r.rest.row(r.T(t, 0)).transpose(), r.rest.row(r.T(t, 1)).transpose(),
+                                 r.rest.row(r.T(t, 2)).transpose(), r.rest.row(r.T(t, 3)).transpose());
+    const double vx = tet_volume(r.X.row(r.T(t, 0)).transpose(), r.X.row(r.T(t, 1)).transpose(),
+                                 r.X.row(r.T(t, 2)).transpose(), r.X.row(r.T(t, 3)).transpose());
+    if (vr * vx > 0) continue;
+    os << "inverted tet " << t << ":";
+    for (int j = 0; j < 4; ++j) {
+      const int v = r.T(t, j);
+      os << "\n  vertex " << v << " at (" << r.X.row(v) << ")";
+      if (v >= deformed.rows()) continue;  // made by a split
+      os << " deformed (" << deformed.row(v) << ")";
+      for (int f : vf[v]) {
+        const Vec3 nx = normal(r.X, f), nd = normal(deformed, f);
+        os << "\n    tri " << f << " (" << B(f, 0) << " " << B(f, 1) << " " << B(f, 2) << ") chart "
+           << chart_of_face[f] << " " << label_name(labels[f]) << " n_polycube (" << nx.normalized().transpose()
+           << ") area " << 0.5 * nx.norm() << " n_deformed (" << nd.normalized().transpose() << ") area "
+           << 0.5 * nd.norm();
+      }
+    }
+    os << "\n";
+  }
+  return os.str();
+}
+
 }  // namespace
 
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T) {
@@ -1127,35 +1164,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       r.T = T;
       r.inverted = least->inverted;
       check_faces(B, labels, r);
-      if (r.inverted > 0 && r.inverted <= 3 && hooks.log) {
-        // What surrounds the last inverted tets: their boundary vertices' planes and triangles.
-        std::ostringstream os;
-        os.precision(4);
-        std::vector<std::vector<int>> vf(n);
-        for (int f = 0; f < B.rows(); ++f)
-          for (int j = 0; j < 3; ++j) vf[B(f, j)].push_back(f);
-        for (int t = 0; t < r.T.rows(); ++t) {
-          Eigen::Matrix3d D;
-          for (int j = 0; j < 3; ++j) D.col(j) = (r.X.row(r.T(t, j + 1)) - r.X.row(r.T(t, 0))).transpose();
-          if (D.determinant() > 0) continue;
-          os << "inverted tet " << t << ":";
-          for (int j = 0; j < 4; ++j) {
-            const int v = r.T(t, j);
-            os << "\n  vertex " << v << " at (" << r.X.row(v) << ") deformed (" << (v < deformed.rows() ? Vec3(deformed.row(v)) : Vec3::Zero()).transpose() << ")";
-            if (v >= static_cast<int>(vf.size())) continue;
-            for (int f : vf[v]) {
-              const Vec3 a = r.X.row(B(f, 0)), b = r.X.row(B(f, 1)), c = r.X.row(B(f, 2));
-              const Vec3 da = deformed.row(B(f, 0)), db = deformed.row(B(f, 1)), dc = deformed.row(B(f, 2));
-              const Vec3 nx = (b - a).cross(c - a), nd = (db - da).cross(dc - da);
-              os << "\n    tri " << f << " (" << B(f, 0) << " " << B(f, 1) << " " << B(f, 2) << ") chart " << charts.of_face[f]
-                 << " " << label_name(labels[f]) << " n_polycube (" << nx.normalized().transpose() << ") area " << 0.5 * nx.norm()
-                 << " n_deformed (" << nd.normalized().transpose() << ") area " << 0.5 * nd.norm();
-            }
-          }
-          os << "\n";
-        }
-        hooks.debug(os.str());
-      }
+      if (r.inverted > 0 && r.inverted <= 3 && hooks.log)
+        hooks.debug(describe_inverted(r, B, labels, charts.of_face, deformed));
     }
     return fail(failures);
   }
