@@ -241,6 +241,18 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   auto sync_labels = [&] {
     for (size_t i = 0; i < cb_row.size(); ++i) e.labels[cb_row[i]] = CL[i];
   };
+  // The retries keep to the continuation start, the one that got every tet positive (when
+  // both starts were tried, the eq17 start mostly fails after a long untangling).
+  auto realize_again = [&] {
+    RealizeOptions ro = opt.realize;
+    if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
+    e.realized = realize_current(ro);
+  };
+  auto realize_after_collapse = [&] {
+    realize_again();
+    hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
+                (e.realized.success ? std::string("success") : e.realized.failure));
+  };
   // Surface mode: flips and collapses first (the relabelling below mostly comes back to the same
   // folds there, at the cost of a realization per attempt).
   if (T.rows() == 0) repair_surface();
@@ -263,13 +275,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
        ++attempt) {
     // Tet mode: edges whose ends the realization pinned to one point are collapsed first (a
     // relabelling cannot give the tets between them room).
-    if (const int made = try_collapse(); made > 0) {
+    if (try_collapse() > 0) {
       N = face_adjacency(CB);
-      RealizeOptions ro = opt.realize;
-      if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
-      e.realized = realize_current(ro);
-      hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
-                  (e.realized.success ? std::string("success") : e.realized.failure));
+      realize_after_collapse();
       --attempt;
       continue;
     }
@@ -348,23 +356,13 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     hooks.debug("retrying the realization with " + std::to_string(changed) +
                 " misoriented triangles relabelled: " + std::to_string(e.charts.charts) + " charts, " +
                 std::to_string(e.charts.corners) + " corners");
-    // The retries keep to the continuation start, the one that got every tet positive (when
-    // both starts were tried, the eq17 start mostly fails after a long untangling).
-    RealizeOptions ro = opt.realize;
-    if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
-    e.realized = realize_current(ro);
+    realize_again();
     retried = true;
   }
   if (T.rows() == 0 && retried) repair_surface();
   // Tet mode: the relabelling may end (or not start: too many misoriented triangles) in a state
   // with pinned edges too.
-  while (try_collapse() > 0) {
-    RealizeOptions ro = opt.realize;
-    if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
-    e.realized = realize_current(ro);
-    hooks.debug("realization after " + std::to_string(collapses) + " edge collapses: " +
-                (e.realized.success ? std::string("success") : e.realized.failure));
-  }
+  while (try_collapse() > 0) realize_after_collapse();
   if (collapses > 0) {
     sync_labels();
     e.edge_collapses = collapses;
