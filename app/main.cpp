@@ -160,6 +160,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17"}));
   app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
       ->capture_default_str()->check(CLI::Range(0, 100000));
+  app.add_option("--polycube-map", opt.polycube_map,
+                 "Skip the deformation and extraction: build on this polycube tet mesh, which has the input tet "
+                 "mesh's vertices and tets (e.g. OUTDIR/polycube.mesh with OUTDIR/tetmesh.mesh as the input, or "
+                 "another tool's polycube map)")
+      ->check(CLI::ExistingFile);
   bool no_cleanup = false;
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
   bool no_rotation = false;

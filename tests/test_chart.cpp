@@ -4,6 +4,7 @@
 #include <set>
 
 #include "polycube/chart/extract.h"
+#include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/solver.h"
 #include "polycube/examples/examples.h"
@@ -470,4 +471,55 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
   EXPECT_EQ(static_cast<int>(used.size()) - edges + static_cast<int>(B.rows()), 2);
   const auto relabelled = chart::label_by_normal(tm.V, B);
   EXPECT_EQ(relabelled, L);
+}
+
+TEST(Realize, GivenPolycubeMapIsLabelledFlattenedAndChecked) {
+  auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  // The box scaled and moved is its own polycube: 6 charts, 8 corners, ARAP distortion of the scale.
+  MatX3d X = 2 * tm.V;
+  X.col(0).array() += 5;
+  // Coordinates written with few digits: each plane within 1e-7 of the diagonal; put back exactly.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1e-7, 1e-7);
+  for (int v = 0; v < X.rows(); ++v)
+    for (int k = 0; k < 3; ++k) X(v, k) += u(rng);
+  const auto e = chart::polycube_from_map(tm.V, tm.T, tm.boundary, X);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.realized.start, "given");
+  EXPECT_EQ(e.charts.charts, 6);
+  EXPECT_EQ(e.charts.corners, 8);
+  EXPECT_TRUE(e.charts.valid);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(e.realized.planes[k], 2);
+  EXPECT_NEAR(e.realized.isometric.mean, 2.0, 1e-5);
+  // Labels follow the normals: the face at x = min is -X (code 1), at z = max +Z (code 4).
+  for (int f = 0; f < tm.boundary.rows(); ++f) {
+    const Vec3 c = (tm.V.row(tm.boundary(f, 0)) + tm.V.row(tm.boundary(f, 1)) + tm.V.row(tm.boundary(f, 2))) / 3;
+    if (c.x() < 1e-9) {
+      EXPECT_EQ(e.labels[f], 1);
+    }
+    if (c.z() > 3 - 1e-9) {
+      EXPECT_EQ(e.labels[f], 4);
+    }
+  }
+  // A vertex pushed off its plane by 1e-3 of the diagonal: not a polycube, named.
+  int corner = -1;
+  for (int v = 0; v < tm.V.rows() && corner < 0; ++v)
+    if (tm.V.row(v).norm() == 0) corner = v;
+  ASSERT_GE(corner, 0);
+  MatX3d bent = 2 * tm.V;
+  bent(corner, 2) -= 1e-3 * (bent.colwise().maxCoeff() - bent.colwise().minCoeff()).norm();
+  try {
+    chart::polycube_from_map(tm.V, tm.T, tm.boundary, bent);
+    ADD_FAILURE() << "a bent polycube was accepted";
+  } catch (const Error& err) {
+    EXPECT_EQ(err.kind(), ErrorKind::InvalidMesh);
+    EXPECT_NE(std::string(err.what()).find("vertex " + std::to_string(corner)), std::string::npos) << err.what();
+  }
+  // A mirrored map turns every tet over.
+  MatX3d mirrored = tm.V;
+  mirrored.col(0) *= -1;
+  EXPECT_THROW(chart::polycube_from_map(tm.V, tm.T, tm.boundary, mirrored), Error);
+  // Another vertex count.
+  EXPECT_THROW(chart::polycube_from_map(tm.V, tm.T, tm.boundary, X.topRows(X.rows() - 1)), Error);
 }

@@ -3,7 +3,9 @@
 #include <filesystem>
 #include <nlohmann/json.hpp>
 
+#include <map>
 #include <set>
+#include <sstream>
 
 #include "polycube/examples/examples.h"
 #include "polycube/hex/quality.h"
@@ -437,4 +439,40 @@ TEST(Cli, FeatureConstraintsFollowTheRemeshedSurface) {
   }
   EXPECT_GE(c["edges"].get<int>(), 15);
   EXPECT_GT(input_edges, 0);
+}
+
+TEST(Cli, HexMeshFromAGivenPolycubeMap) {
+  std::string dir = temp_dir("given_map");
+  ASSERT_EQ(run_cli("--example box_hole -q -o " + dir + "/a").code, 0);
+  // The pair tetmesh.mesh / polycube.mesh of the first run is a map the hex stage takes as it is.
+  RunResult r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex -o " + dir + "/b");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json a = report(dir + "/a"), b = report(dir + "/b");
+  EXPECT_EQ(b["polycube"]["source"], dir + "/a/polycube.mesh");
+  EXPECT_EQ(b["polycube"]["realization"]["start"], "given");
+  EXPECT_EQ(b["polycube"]["charts"], a["polycube"]["charts"]);
+  EXPECT_EQ(b["polycube"]["corners"], a["polycube"]["corners"]);
+  EXPECT_NEAR(b["polycube"]["arap_distortion"].get<double>(), a["polycube"]["arap_distortion"].get<double>(), 1e-9);
+  EXPECT_FALSE(b["polycube"].contains("l1_quality"));  // no deformation ran
+  // labels.txt follows the input's triangles (here the tet mesh's boundary, in another order):
+  // the same number of triangles per label.
+  auto histogram = [](const std::string& text) {
+    std::map<std::string, int> h;
+    std::istringstream is(text);
+    for (std::string l; std::getline(is, l);) ++h[l];
+    return h;
+  };
+  EXPECT_TRUE(histogram(read_text(dir + "/b/labels.txt")) == histogram(read_text(dir + "/a/labels.txt")));
+  EXPECT_EQ(b["hex"]["inverted"], 0);
+  EXPECT_GT(b["hex"]["sj_min"].get<double>(), 0.5);
+  EXPECT_GT(b["hex"]["count"].get<int>(), 5000);
+  // A map of another mesh is refused, naming the mismatch, and nothing is presented as a result.
+  ASSERT_EQ(run_cli("--example sphere --until tet -q -o " + dir + "/c").code, 0);
+  r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/c/tetmesh.mesh --hex -o " + dir + "/d");
+  EXPECT_EQ(r.code, 4) << r.output;
+  EXPECT_NE(r.output.find("must have the tet mesh's vertices and tets"), std::string::npos) << r.output;
+  EXPECT_FALSE(std::filesystem::exists(dir + "/d/hex.mesh"));
+  // A surface input has no tets to map.
+  r = run_cli(dir + "/a/map.obj --polycube-map " + dir + "/a/polycube.mesh -o " + dir + "/e");
+  EXPECT_EQ(r.code, 2) << r.output;
 }

@@ -181,9 +181,24 @@ inline double enclosed_volume(const MatX3d& V, const MatX3i& F) {
   return v;
 }
 
+/// This test process's temp dir; removed when the process exits (set POLYCUBE_KEEP_TEST_FILES to
+/// keep it for inspection).
+inline std::filesystem::path test_temp_root() {
+  struct Root {
+    std::filesystem::path path =
+        std::filesystem::temp_directory_path() / ("polycube_test_" + std::to_string(::getpid()));
+    ~Root() {
+      std::error_code ec;
+      if (!std::getenv("POLYCUBE_KEEP_TEST_FILES")) std::filesystem::remove_all(path, ec);
+    }
+  };
+  static const Root root;
+  return root.path;
+}
+
 /// A fresh empty folder under the test temp dir.
 inline std::string temp_dir(const std::string& name) {
-  auto p = std::filesystem::temp_directory_path() / ("polycube_test_" + std::to_string(::getpid())) / name;
+  auto p = test_temp_root() / name;
   std::filesystem::remove_all(p);
   std::filesystem::create_directories(p);
   return p.string();

@@ -7,6 +7,7 @@
 #include <string>
 #include <tuple>
 
+#include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
 #include "polycube/validate/tetmesh.h"
@@ -665,6 +666,103 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
   for (int i = static_cast<int>(gone_faces.size()) - 1; i >= 0; --i) labels.erase(labels.begin() + gone_faces[i]);
   if (removed) *removed = gone_faces;
   return true;
+}
+
+}  // namespace polycube::chart
+
+namespace polycube::chart {
+
+PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& X_in,
+                                     double tolerance) {
+  Stopwatch sw;
+  if (X_in.rows() != rest.rows())
+    throw Error(ErrorKind::InvalidMesh, "the polycube map has " + std::to_string(X_in.rows()) +
+                                            " vertices where the tet mesh has " + std::to_string(rest.rows()));
+  PolycubeExtraction ex;
+  RealizeResult& r = ex.realized;
+  r.rest = rest;
+  r.T = T;
+  r.X = X_in;
+  r.start = "given";
+  Eigen::AlignedBox3d box;
+  for (int v = 0; v < X_in.rows(); ++v) box.extend(X_in.row(v).transpose());
+  const double diag = box.diagonal().norm();
+  // Labels: the dominant axis of each triangle's normal.
+  ex.labels.resize(B.rows());
+  for (int f = 0; f < B.rows(); ++f) {
+    const Vec3 n = deform::area_normal(X_in, B(f, 0), B(f, 1), B(f, 2));
+    int k = 0;
+    n.cwiseAbs().maxCoeff(&k);
+    if (!(n.norm() > 1e-14 * diag * diag))
+      throw Error(ErrorKind::InvalidMesh, "polycube map: boundary triangle " + std::to_string(f) + " (vertices " +
+                                              std::to_string(B(f, 0)) + " " + std::to_string(B(f, 1)) + " " +
+                                              std::to_string(B(f, 2)) + ") has zero area");
+    ex.labels[f] = 2 * k + (n[k] < 0 ? 1 : 0);
+  }
+  // Planes: per axis, the vertices of touching triangles of that axis share one coordinate.
+  int worst_v = -1, worst_k = 0;
+  double worst_h = 0;
+  for (int k = 0; k < 3; ++k) {
+    UnionFind uf(static_cast<int>(X_in.rows()));
+    for (int f = 0; f < B.rows(); ++f)
+      if (ex.labels[f] / 2 == k) uf.unite(B(f, 0), B(f, 1)), uf.unite(B(f, 0), B(f, 2));
+    std::vector<double> sum(X_in.rows(), 0.0);
+    std::vector<int> count(X_in.rows(), 0);
+    std::vector<char> on(X_in.rows(), 0);
+    for (int f = 0; f < B.rows(); ++f)
+      if (ex.labels[f] / 2 == k)
+        for (int j = 0; j < 3; ++j) on[B(f, j)] = 1;
+    for (int v = 0; v < X_in.rows(); ++v)
+      if (on[v]) sum[uf.find(v)] += X_in(v, k), ++count[uf.find(v)];
+    for (int v = 0; v < X_in.rows(); ++v) {
+      if (!on[v]) continue;
+      const double h = sum[uf.find(v)] / count[uf.find(v)];
+      const double off = std::abs(X_in(v, k) - h) / std::max(diag, 1e-300);
+      if (off > r.planarity_error) r.planarity_error = off, worst_v = v, worst_k = k, worst_h = h;
+      r.X(v, k) = h;
+    }
+  }
+  if (r.planarity_error > tolerance)
+    throw Error(ErrorKind::InvalidMesh, "polycube map: vertex " + std::to_string(worst_v) + " is " +
+                                            std::to_string(r.planarity_error) + " of the bbox diagonal off the " +
+                                            std::string(1, "xyz"[worst_k]) + " plane of its charts (at " +
+                                            std::to_string(worst_h) + "): not an axis-aligned polycube");
+  // Every tet positive, every triangle facing its label.
+  for (int t = 0; t < T.rows(); ++t) {
+    const Vec3 a = r.X.row(T(t, 0)), b = r.X.row(T(t, 1)), c = r.X.row(T(t, 2)), d = r.X.row(T(t, 3));
+    if (!((b - a).dot((c - a).cross(d - a)) > 0)) ++r.inverted;
+  }
+  if (r.inverted > 0) {
+    int first = 0;
+    for (int t = 0; t < T.rows(); ++t) {
+      const Vec3 a = r.X.row(T(t, 0)), b = r.X.row(T(t, 1)), c = r.X.row(T(t, 2)), d = r.X.row(T(t, 3));
+      if (!((b - a).dot((c - a).cross(d - a)) > 0)) {
+        first = t;
+        break;
+      }
+    }
+    throw Error(ErrorKind::InvalidMesh, "polycube map: " + std::to_string(r.inverted) +
+                                            " tets are inverted or flat in the polycube (first: tet " +
+                                            std::to_string(first) + ")");
+  }
+  check_faces(B, ex.labels, r);
+  if (r.misoriented_faces > 0)
+    throw Error(ErrorKind::InvalidMesh, "polycube map: " + std::to_string(r.misoriented_faces) +
+                                            " boundary triangles do not face their plane's direction once planar");
+  for (int k = 0; k < 3; ++k) {
+    std::vector<double> h;
+    for (int f = 0; f < B.rows(); ++f)
+      if (ex.labels[f] / 2 == k) h.push_back(r.X(B(f, 0), k));
+    std::sort(h.begin(), h.end());
+    r.planes[k] = static_cast<int>(std::unique(h.begin(), h.end()) - h.begin());
+  }
+  r.arap = deform::arap_energy(r.X, T, deform::ArapRest::build(rest, T), 1.0, nullptr, nullptr);
+  r.isometric = isometric_distortion(rest, r.X, T);
+  ex.charts = check_charts(B, static_cast<int>(X_in.rows()), ex.labels);
+  ex.initial_charts = ex.charts.charts;
+  r.success = true;
+  r.seconds = sw.seconds();
+  return ex;
 }
 
 }  // namespace polycube::chart

@@ -90,4 +90,15 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
                        int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr);
 
+/// A polycube map given from outside (an earlier run's tetmesh.mesh / polycube.mesh pair, or another
+/// tool's): X the polycube positions of the tet mesh (rest, T; B its outward boundary). Each boundary
+/// triangle takes the label of its normal's dominant axis; the vertices of the charts of one axis
+/// that touch (one plane) are put at their mean coordinate, which must be within
+/// `tolerance` x the bbox diagonal of X of every one of them (files written with few digits pass,
+/// a shape that is not a polycube does not). The result is as extract_polycube's on success
+/// (realized.start = "given", cleanup counts zero). Throws Error(InvalidMesh) naming the first
+/// triangle off its plane, of zero area, or the first tet that is not positive.
+PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& X,
+                                     double tolerance = 1e-6);
+
 }  // namespace polycube::chart

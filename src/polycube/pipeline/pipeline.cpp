@@ -169,11 +169,19 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     // the surface is remeshed): the polycube map then needs no transfer.
     std::vector<int> surf_to_tet;
     bool input_closed = true;
+    const bool given_map = !opt.polycube_map.empty();
+    if (given_map && in.T.rows() == 0)
+      throw Error(ErrorKind::Usage, "--polycube-map needs the map's tet mesh as the input (e.g. an earlier run's "
+                                    "tetmesh.mesh with its polycube.mesh), not a " +
+                                        std::string(in.H.rows() > 0 ? "hex mesh" : "surface"));
+    if (given_map && opt.surface) throw Error(ErrorKind::Usage, "--polycube-map takes a tet mesh polycube: drop --surface");
+    std::vector<int> tet_vertex_map;  // tet input: new index of every vertex of the file
     if (in.T.rows() > 0) {
       // Tet mesh input: checked, its boundary validated like a surface input.
       report["input"]["kind"] = "tet";
       TetInputReport tr;
       tm = prepare_tet_input(in, tr);
+      tet_vertex_map = tr.vertex_map;
       std::vector<int> back;
       const SurfaceMesh bs = compact_surface(tm.V, tm.boundary, &back);
       MeshData bm = make_mesh_data(bs.V, bs.F, in.format);
@@ -267,7 +275,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj["gmsh_runs"] = stats.attempts;
       }
       // Tets with four boundary vertices would have to flatten on polycube faces: split them.
-      const int split = opt.surface ? 0 : split_boundary_tets(tm);
+      // (Not when a polycube map is given: its tets are those of the input.)
+      const int split = opt.surface || given_map ? 0 : split_boundary_tets(tm);
       if (split > 0) {
         check_tet_mesh(tm, nullptr, "split tet mesh");
         const TetQuality sq = measure_tets(tm.V, tm.T);
@@ -434,14 +443,40 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                    std::to_string(opt.deform.target_quality));
       hooks.report("deform", 1);
     };
-    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform)) run_deform(opt.deform.barrier_weight);
+    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && !given_map)
+      run_deform(opt.deform.barrier_weight);
+
+    // A polycube map given: the file's tets must be the input's, vertex for vertex.
+    auto read_given_map = [&] {
+      hooks.info("reading the polycube map " + opt.polycube_map);
+      const MeshData P = io::read_mesh(opt.polycube_map, opt.cad);
+      const std::string what = opt.polycube_map + ": a polycube map must have the tet mesh's vertices and tets (" +
+                               std::to_string(tet_vertex_map.size()) + " and " + std::to_string(in.T.rows()) +
+                               " in " + (opt.input.empty() ? std::string("the input") : opt.input) + ")";
+      if (P.V.rows() != static_cast<Eigen::Index>(tet_vertex_map.size()) || P.T.rows() != in.T.rows())
+        throw Error(ErrorKind::InvalidMesh, what + ", it has " + std::to_string(P.V.rows()) + " vertices and " +
+                                                std::to_string(P.T.rows()) + " tets");
+      for (int t = 0; t < P.T.rows(); ++t) {
+        std::array<int, 4> a{P.T(t, 0), P.T(t, 1), P.T(t, 2), P.T(t, 3)}, b{in.T(t, 0), in.T(t, 1), in.T(t, 2), in.T(t, 3)};
+        std::sort(a.begin(), a.end());
+        std::sort(b.begin(), b.end());
+        if (a != b)
+          throw Error(ErrorKind::InvalidMesh, what + "; its tet " + std::to_string(t) + " has other vertices");
+      }
+      MatX3d X(tm.V.rows(), 3);
+      for (size_t i = 0; i < tet_vertex_map.size(); ++i)
+        if (tet_vertex_map[i] >= 0) X.row(tet_vertex_map[i]) = P.V.row(static_cast<Eigen::Index>(i));
+      return chart::polycube_from_map(tm.V, tm.T, tm.boundary, X);
+    };
 
     // ---- polycube -----------------------------------------------------------------------
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Polycube)) {
       Stopwatch sp;
       hooks.report("polycube", 0);
       hooks.info("extracting the polycube");
-      chart::PolycubeExtraction ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+      chart::PolycubeExtraction ex =
+          given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+      if (given_map) report["polycube"]["source"] = opt.polycube_map;
       if (!ex.realized.success && opt.surface && opt.surface_retry_barrier > 1) {
         // Surface mode: nothing but the anti-foldover barrier keeps the surface from folding into
         // thin fins (triangles of opposite normals pressed together at a corner), which no
@@ -458,8 +493,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
       const chart::RealizeResult& rr = ex.realized;
       json& pj = report["polycube"];
-      pj["deformed_arap_distortion"] = dr.arap;
-      {
+      if (!given_map) {
+        pj["deformed_arap_distortion"] = dr.arap;
         const chart::Distortion di = opt.surface ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
                                                  : chart::isometric_distortion(tm.V, dr.X, tm.T);
         pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
@@ -587,7 +622,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::CellFields df;
       df["label"] = ex.labels;
       df["label"].resize(B.rows() + tm.T.rows(), -1);
-      write_deformed_vtk(df);
+      if (!given_map) write_deformed_vtk(df);
       {
         const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
         io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
@@ -595,8 +630,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::write_obj(stage_path("map.obj"), map_V, surface.F);
       // Labels on the input surface and the deformed mesh too.
       io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
-      if (rr.split_edges + rr.split_faces > 0) {
-        // The tet mesh gained midpoints: rewrite it so that tetmesh.* and polycube.* stay a map.
+      if (rr.split_edges + rr.split_faces > 0 || rr.T.rows() != tm.T.rows() || rr.T != tm.T) {
+        // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
+        // tetmesh.* and polycube.* stay a map.
         MeshData tmo;
         tmo.V = rr.rest;
         tmo.T = rr.T;

@@ -58,6 +58,11 @@ struct PipelineOptions {
   std::string export_features;
   constraints::ConstraintOptions constraint;
   chart::ExtractOptions polycube;
+  /// A polycube map to build on instead of deforming and extracting: a tet mesh file with the
+  /// input's tets (same vertices, same tets; e.g. an earlier run's polycube.mesh for its
+  /// tetmesh.mesh, or another tool's polycube tet mesh) whose boundary is an axis-aligned polycube.
+  /// The input must then be the tet mesh. Empty: off.
+  std::string polycube_map;
   hex::HexOptions hex;
   /// Quad stage: approximate quad count (0 = the hex stage's resolution; in surface mode 2000) and smoothing.
   int target_quads = 0;

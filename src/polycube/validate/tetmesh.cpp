@@ -111,6 +111,7 @@ TetMesh prepare_tet_input(const MeshData& m, TetInputReport& rep) {
   for (int i = 0; i < m.V.rows(); ++i)
     if (used[i] == 1) used[i] = n++;
   rep.unreferenced_removed = static_cast<int>(m.V.rows()) - n;
+  rep.vertex_map = used;
   tm.V.resize(n, 3);
   for (int i = 0; i < m.V.rows(); ++i)
     if (used[i] >= 0) tm.V.row(used[i]) = m.V.row(i);

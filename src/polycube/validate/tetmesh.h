@@ -30,6 +30,7 @@ MatX3i tet_boundary(const MatX4i& T, const std::string& name = "tet mesh");
 struct TetInputReport {
   int unreferenced_removed = 0;
   int tets_reoriented = 0;  ///< all tets were negatively oriented and have been flipped
+  std::vector<int> vertex_map;  ///< new index of every input vertex (-1: unreferenced, removed)
 };
 
 /// Turns a tet-mesh input into a checked TetMesh: unreferenced vertices removed, a globally
