@@ -182,6 +182,10 @@ int main(int argc, char** argv) {
                  "Hex mesh: one layer of hexes along the boundary: on, off, or auto (both tried, the higher min "
                  "scaled Jacobian wins)")
       ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
+  app.add_option("--thin-steps", hx.merge_thin_steps,
+                 "Hex mesh: planes of a step closer than this many cells share one integer (the step's riser "
+                 "vanishes instead of getting a layer of flat hexes); 0 = every step keeps a cell")
+      ->capture_default_str()->check(CLI::Range(0.0, 0.9));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
   app.add_flag("--surface", opt.surface,

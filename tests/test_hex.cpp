@@ -168,6 +168,54 @@ TEST(Hex, ConstrainedSnappingMergesOnlyPlanesThatDoNotFaceEachOther) {
   EXPECT_EQ(c.snapped[0], (std::vector<int>{0, 4, 8, 12}));
 }
 
+TEST(Hex, AThinStepLosesItsRiserInsteadOfGettingASquashedLayerOfHexes) {
+  // The l_bracket with its upright leg squashed to 0.015 above the foot: a step of 0.06 cell at 4
+  // cells per unit between the foot's top (z = 0.5) and the leg's (z = 0.515). The two planes face
+  // no common line, so they may share an integer; kept a cell apart, the layer of hexes above the
+  // foot would be squeezed into the 0.06-cell step.
+  const MeshData l = examples::make("l_bracket", 0.1);
+  const TetMesh tm = tet_mesh_of(l.V, l.F);
+  MatX3d X = tm.V;
+  for (int v = 0; v < X.rows(); ++v)
+    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.01 * (X(v, 2) - 0.5);
+  ASSERT_EQ(measure_tets(X, tm.T).inverted, 0);
+  ASSERT_EQ(measure_tets(X, tm.T).zero_volume, 0);
+  const std::vector<int> labels = chart::label_by_normal(X, tm.boundary);
+  const hex::Snapping merged = hex::snap_polycube(X, tm.T, tm.boundary, labels, 4, true, 0.25);
+  ASSERT_EQ(merged.heights[2].size(), 3u);
+  EXPECT_EQ(merged.snapped[2], (std::vector<int>{0, 2, 2}));
+  EXPECT_EQ(merged.merged[2], 1);
+  EXPECT_EQ(merged.merged[0] + merged.merged[1], 0);
+  const hex::Snapping kept = hex::snap_polycube(X, tm.T, tm.boundary, labels, 4, true, 0.0);
+  EXPECT_EQ(kept.snapped[2], (std::vector<int>{0, 2, 3}));
+  EXPECT_NEAR(kept.min_slab_ratio, 0.06, 1e-9);
+  // The hex mesh of that polycube (the map is the identity, the squashed shape the target).
+  const SurfaceMesh target{X, tm.boundary};
+  hex::HexOptions o;
+  o.cells_per_unit = 4;
+  o.pillow = "off";
+  const hex::HexResult r = hex::hex_mesh_from_polycube(X, tm.T, X, tm.boundary, labels, &target, o);
+  // Shortest hex edge (cells are 0.25 long; the scaled Jacobian does not see flat boxes).
+  auto shortest_edge = [](const hex::HexResult& h) {
+    static constexpr int e[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                                     {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+    double m = 1e300;
+    for (int c = 0; c < h.H.rows(); ++c)
+      for (const auto& ab : e) m = std::min(m, (h.V.row(h.H(c, ab[0])) - h.V.row(h.H(c, ab[1]))).norm());
+    return m;
+  };
+  EXPECT_EQ(r.merged_planes, 1);
+  EXPECT_EQ(r.cells[2], 2);
+  EXPECT_EQ(r.quality.inverted, 0);
+  EXPECT_GT(r.quality.sj_min, 0.3);
+  EXPECT_GT(shortest_edge(r), 0.1);
+  o.merge_thin_steps = 0;
+  const hex::HexResult q = hex::hex_mesh_from_polycube(X, tm.T, X, tm.boundary, labels, &target, o);
+  EXPECT_EQ(q.merged_planes, 0);
+  EXPECT_EQ(q.cells[2], 3);
+  EXPECT_LT(shortest_edge(q), 0.02);
+}
+
 TEST(Hex, AnOverlappingPolycubeIsRefused) {
   // Two boxes, each a valid polycube, moved so that they overlap: every tet is positive, yet a line
   // along z meets two bottoms in a row. Snapping counts such lines and extraction refuses.

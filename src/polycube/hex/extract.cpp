@@ -79,7 +79,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   // share an integer; the polycube deformed to the snapped planes (Y, grid units) must keep every
   // tet positive, else the plain sorted snapping is tried, and last the per-axis piecewise-linear
   // map of the sorted snapping (exact, but it stretches slabs between planes that do not interact).
-  Snapping sn = snap_polycube(X, T, B, labels, s, true);
+  Snapping sn = snap_polycube(X, T, B, labels, s, true, opt.merge_thin_steps);
   r.snapping = "constrained";
   {
     const std::array<int, 3>& o = sn.overlap_lines;
@@ -109,6 +109,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     r.snapped[k] = sn.snapped[k];
     r.cells[k] = *std::max_element(sn.snapped[k].begin(), sn.snapped[k].end());
     r.shared_planes += sn.shared[k];
+    r.merged_planes += sn.merged[k];
   }
   r.min_slab_ratio = sn.min_slab_ratio;
   const long long bbox_cells = 1LL * r.cells[0] * r.cells[1] * r.cells[2];

@@ -138,7 +138,7 @@ std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::ve
 }
 
 Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
-                       double s, bool constrained) {
+                       double s, bool constrained, double merge_below) {
   Snapping sn;
   const int nv = static_cast<int>(X.rows());
   const double diag = bbox_diagonal(X);
@@ -187,11 +187,11 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
     for (int f : tris)
       for (int j = 0; j < 3; ++j) vplane[B(f, j)] = tri_plane[f];
     const int np = static_cast<int>(h.size());
-    std::vector<std::vector<int>> above;
     if (constrained) {
-      above = facing_planes(X, B, labels, tri_plane, tris, k, np, sn.overlap_lines[k]);
+      const std::vector<std::vector<int>> facing = facing_planes(X, B, labels, tri_plane, tris, k, np, sn.overlap_lines[k]);
       // The planes of axis k bounding one chart of another axis keep their order and a cell
       // between them, or that chart (a step, a side face) would lose its height.
+      std::vector<std::vector<int>> above = facing;
       std::vector<std::pair<int, int>> cp;  // (chart, plane)
       for (int f = 0; f < B.rows(); ++f)
         if (labels[f] / 2 != k)
@@ -201,8 +201,35 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
       cp.erase(std::unique(cp.begin(), cp.end()), cp.end());
       for (size_t i = 0; i + 1 < cp.size(); ++i)
         if (cp[i].first == cp[i + 1].first) above[cp[i].second].push_back(cp[i + 1].second);
+      // Thin steps: runs of consecutive planes spanning less than merge_below cells, no two of which
+      // face each other (through the volume or a gap), share one integer; their risers (the charts
+      // between them) lose their height instead of a one-cell layer of hexes being squeezed into
+      // a fraction of a cell of the input.
+      std::vector<int> group(np);
+      std::vector<double> hg;
+      for (int p = 0; p < np;) {
+        int q = p + 1;
+        for (; merge_below > 0 && q < np && s * (h[q] - h[p]) < merge_below; ++q) {
+          bool faces = false;
+          for (int m = p; m < q && !faces; ++m) faces = std::find(facing[m].begin(), facing[m].end(), q) != facing[m].end();
+          if (faces) break;
+        }
+        double mean = 0;
+        for (int m = p; m < q; ++m) group[m] = static_cast<int>(hg.size()), mean += h[m] / (q - p);
+        sn.merged[k] += q - p - 1;
+        hg.push_back(mean);
+        p = q;
+      }
+      std::vector<std::vector<int>> above_g(hg.size());
+      for (int i = 0; i < np; ++i)
+        for (int j : above[i])
+          if (group[j] != group[i]) above_g[group[i]].push_back(group[j]);
+      const std::vector<int> ng = snap_heights(hg, s, above_g);
+      sn.snapped[k].resize(np);
+      for (int i = 0; i < np; ++i) sn.snapped[k][i] = ng[group[i]];
+    } else {
+      sn.snapped[k] = snap_heights(h, s);
     }
-    sn.snapped[k] = constrained ? snap_heights(h, s, above) : snap_heights(h, s);
     const std::vector<int>& n = sn.snapped[k];
     for (int i = 0; i < np; ++i)
       if ((i > 0 && n[i] == n[i - 1]) || (i + 1 < np && n[i] == n[i + 1])) ++sn.shared[k];

@@ -30,6 +30,7 @@ struct Snapping {
   std::array<std::vector<double>, 3> heights;  ///< distinct plane heights per axis, increasing
   std::array<std::vector<int>, 3> snapped;     ///< their integers (lowest 0)
   std::array<int, 3> shared{};                 ///< planes sharing their integer with another plane, per axis
+  std::array<int, 3> merged{};                 ///< planes of thin steps merged into the plane below (merge_below)
   /// Thinnest slab: min over consecutive planes with different integers of s (h_j - h_i) / (n_j - n_i);
   /// well below 1 when planes much closer than a cell had to be kept a cell apart.
   double min_slab_ratio = 1e300;
@@ -43,8 +44,11 @@ struct Snapping {
 
 /// X/T: the exact polycube tet mesh; B/labels: its boundary triangles and chart labels;
 /// constrained = false: plain sorted snapping (every plane a cell above the previous one).
+/// merge_below (constrained only): consecutive planes of an axis spanning less than this many
+/// cells share one integer unless two of them face each other (a thin step loses its riser rather
+/// than get a layer of hexes a fraction of a cell thick in the input); 0 = never.
 Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
-                       double cells_per_unit, bool constrained = true);
+                       double cells_per_unit, bool constrained = true, double merge_below = 0);
 
 /// Per axis, the sample lines (through every chart face, as in the snapping) that meet two faces
 /// of the same orientation in a row: > 0 when the polycube overlaps itself.

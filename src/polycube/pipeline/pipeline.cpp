@@ -716,8 +716,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           std::string why = "; try more hexes (--hexes)";
           if (hr.min_slab_ratio < 0.05)
             why = "; the polycube has planes " + std::to_string(hr.min_slab_ratio) +
-                  " of a cell apart that must stay a cell apart (a step far thinner than a hex), which stretches "
-                  "the map there";
+                  " of a cell apart that must stay a cell apart (a slab or step far thinner than a hex, " +
+                  (opt.hex.merge_thin_steps > 0 ? std::string("whose planes face each other so that --thin-steps cannot merge them")
+                                                : std::string("try --thin-steps")) +
+                  "), which stretches the map there";
           throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
                                                " hexes are inverted or degenerate after optimization (min scaled "
                                                "Jacobian " + std::to_string(hr.quality.sj_min) + ")" + why);
@@ -745,6 +747,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
                       {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
+                      {"merged_planes", hr.merged_planes},
                       {"min_slab_ratio", hr.min_slab_ratio}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["sharp_vertices"] = hr.sharp_vertices;
