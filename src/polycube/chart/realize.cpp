@@ -66,6 +66,115 @@ int count_inverted(const MatX3d& X, const MatX4i& T, const deform::ArapRest& res
   return n;
 }
 
+// Local untangling: Gauss-Seidel sweeps over the vertices within `rings` tet rings of the
+// inverted tets, each moved along its free axes (fixed(v, k) false; planes' heights stay) by a
+// Newton step on the elliptic energy of its tets (Realizer::untangle_elliptic), the 3 x 3 Hessian by central
+// differences of the exact gradient and made definite, with backtracking. eps follows the
+// region's smallest volume ratio. After a global solve a few inverted tets often remain where
+// the global preconditioner (the ARAP matrix) says nothing about their vertices; here each
+// vertex sees only its own tets. Returns the sweeps taken.
+template <class Fixed>
+int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed fixed, MatX3d& X, int& inverted,
+                     int rings, int max_sweeps) {
+  const int n = static_cast<int>(X.rows());
+  const int nt = static_cast<int>(T_.rows());
+  std::vector<std::vector<int>> vt(n);
+  for (int t = 0; t < nt; ++t)
+    for (int j = 0; j < 4; ++j) vt[T_(t, j)].push_back(t);
+  double vol = 0;
+  for (int t = 0; t < nt; ++t) vol += arap_rest_.w[t] * volume_ratio(X, T_, arap_rest_, t);
+  const double s = std::cbrt(std::max(vol, 1e-300));
+  constexpr double theta = 0.5;
+  inverted = count_inverted(X, T_, arap_rest_);
+  int sweep = 0, best = inverted, since_best = 0;
+  for (; sweep < max_sweeps && inverted > 0 && since_best < 30; ++sweep) {
+    // The region: vertices within `rings` of an inverted tet, found again every sweep (a sweep
+    // is 10 passes over it).
+    std::vector<char> in(n, 0);
+    std::vector<int> region;
+    for (int t = 0; t < nt; ++t)
+      if (!(volume_ratio(X, T_, arap_rest_, t) > 0))
+        for (int j = 0; j < 4; ++j)
+          if (!in[T_(t, j)]) in[T_(t, j)] = 1, region.push_back(T_(t, j));
+    for (int r = 0; r < rings; ++r) {
+      const size_t m = region.size();
+      for (size_t i = 0; i < m; ++i)
+        for (int t : vt[region[i]])
+          for (int j = 0; j < 4; ++j)
+            if (!in[T_(t, j)]) in[T_(t, j)] = 1, region.push_back(T_(t, j));
+    }
+    double dmin = std::numeric_limits<double>::infinity();
+    for (int v : region)
+      for (int t : vt[v]) dmin = std::min(dmin, volume_ratio(X, T_, arap_rest_, t) / (s * s * s));
+    const double eps = dmin < 0 ? std::max(1e-12, 0.1 * -dmin) : 1e-8;
+    for (int inner = 0; inner < 10; ++inner)
+      for (int v : region) {
+        int free_axes[3], nf = 0;
+        for (int k = 0; k < 3; ++k)
+          if (!fixed(v, k)) free_axes[nf++] = k;
+        if (nf == 0) continue;
+        auto star = [&](const Eigen::RowVector3d& p, Vec3* g) {
+          const Eigen::RowVector3d keep = X.row(v);
+          X.row(v) = p;
+          double E = 0;
+          if (g) g->setZero();
+          Eigen::Matrix<double, 12, 1> ge;
+          for (int t : vt[v]) {
+            E += deform::untangle_tet_energy(X, T_, arap_rest_, t, eps, s, theta, g ? &ge : nullptr);
+            if (g)
+              for (int j = 0; j < 4; ++j)
+                if (T_(t, j) == v) *g += ge.segment<3>(3 * j);
+          }
+          X.row(v) = keep;
+          return E;
+        };
+        const Eigen::RowVector3d p0 = X.row(v);
+        double len = 0;
+        for (int t : vt[v]) len += (X.row(T_(t, 0)) - X.row(T_(t, 1))).norm();
+        len /= std::max<size_t>(1, vt[v].size());
+        Vec3 g;
+        const double E0 = star(p0, &g);
+        Eigen::VectorXd gf(nf);
+        Eigen::MatrixXd H(nf, nf);
+        for (int a = 0; a < nf; ++a) gf[a] = g[free_axes[a]];
+        const double hstep = 1e-6 * len;
+        for (int b = 0; b < nf; ++b) {
+          Eigen::RowVector3d pp = p0, pm = p0;
+          pp[free_axes[b]] += hstep;
+          pm[free_axes[b]] -= hstep;
+          Vec3 gp, gm;
+          star(pp, &gp);
+          star(pm, &gm);
+          for (int a = 0; a < nf; ++a) H(a, b) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * hstep);
+        }
+        H = 0.5 * (H + H.transpose()).eval();
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
+        Eigen::VectorXd ev = es.eigenvalues();
+        const double floor = 1e-8 * std::max(ev.cwiseAbs().maxCoeff(), 1e-300);
+        for (int a = 0; a < nf; ++a) ev[a] = std::max(std::abs(ev[a]), floor);
+        const Eigen::VectorXd df = -es.eigenvectors() * (es.eigenvectors().transpose() * gf).cwiseQuotient(ev);
+        Eigen::RowVector3d d = Eigen::RowVector3d::Zero();
+        for (int a = 0; a < nf; ++a) d[free_axes[a]] = df[a];
+        const double dn = d.norm();
+        double step = dn > 0.5 * len ? 0.5 * len / dn : 1.0;
+        const double slope = df.dot(gf);
+        if (!(slope < 0)) continue;
+        for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+          const Eigen::RowVector3d p = p0 + step * d;
+          if (star(p, nullptr) <= E0 + 1e-4 * step * slope) {
+            X.row(v) = p;
+            break;
+          }
+        }
+      }
+    inverted = count_inverted(X, T_, arap_rest_);
+    if (inverted < best) best = inverted, since_best = 0;
+    else ++since_best;
+  }
+  return sweep;
+}
+
+
 // Planes: per axis, the plane (group of charts) of every vertex, -1 for none.
 struct Planes {
   std::vector<int> of_vertex[3];
@@ -341,113 +450,14 @@ class Realizer {
     return total;
   }
 
-  // Local untangling: Gauss-Seidel sweeps over the vertices within `rings` tet rings of the
-  // inverted tets, each moved along its free axes (those of no plane it lies on; heights stay) by a
-  // Newton step on the elliptic energy of its tets (above), the 3 x 3 Hessian by central
-  // differences of the exact gradient and made definite, with backtracking. eps follows the
-  // region's smallest volume ratio. After a global solve a few inverted tets often remain where
-  // the global preconditioner (the ARAP matrix) says nothing about their vertices; here each
-  // vertex sees only its own tets. Returns the sweeps taken.
+  // Local untangling (untangle_locally below) with the planes' coordinates fixed.
   int untangle_local(MatX3d& X, int& inverted, int rings = 3, int max_sweeps = 300) const {
-    const int n = static_cast<int>(rest_.rows());
-    const int nt = static_cast<int>(T_.rows());
-    std::vector<std::vector<int>> vt(n);
-    for (int t = 0; t < nt; ++t)
-      for (int j = 0; j < 4; ++j) vt[T_(t, j)].push_back(t);
-    double vol = 0;
-    for (int t = 0; t < nt; ++t) vol += arap_rest_.w[t] * volume_ratio(X, T_, arap_rest_, t);
-    const double s = std::cbrt(std::max(vol, 1e-300));
-    constexpr double theta = 0.5;
-    inverted = count_inverted(X, T_, arap_rest_);
-    int sweep = 0, best = inverted, since_best = 0;
-    for (; sweep < max_sweeps && inverted > 0 && since_best < 30; ++sweep) {
-      // The region: vertices within `rings` of an inverted tet, found again every sweep (a sweep
-      // is 10 passes over it).
-      std::vector<char> in(n, 0);
-      std::vector<int> region;
-      for (int t = 0; t < nt; ++t)
-        if (!(volume_ratio(X, T_, arap_rest_, t) > 0))
-          for (int j = 0; j < 4; ++j)
-            if (!in[T_(t, j)]) in[T_(t, j)] = 1, region.push_back(T_(t, j));
-      for (int r = 0; r < rings; ++r) {
-        const size_t m = region.size();
-        for (size_t i = 0; i < m; ++i)
-          for (int t : vt[region[i]])
-            for (int j = 0; j < 4; ++j)
-              if (!in[T_(t, j)]) in[T_(t, j)] = 1, region.push_back(T_(t, j));
-      }
-      double dmin = std::numeric_limits<double>::infinity();
-      for (int v : region)
-        for (int t : vt[v]) dmin = std::min(dmin, volume_ratio(X, T_, arap_rest_, t) / (s * s * s));
-      const double eps = dmin < 0 ? std::max(1e-12, 0.1 * -dmin) : 1e-8;
-      for (int inner = 0; inner < 10; ++inner)
-        for (int v : region) {
-          int free_axes[3], nf = 0;
-          for (int k = 0; k < 3; ++k)
-            if (planes_.of_vertex[k][v] < 0) free_axes[nf++] = k;
-          if (nf == 0) continue;
-          auto star = [&](const Eigen::RowVector3d& p, Vec3* g) {
-            const Eigen::RowVector3d keep = X.row(v);
-            X.row(v) = p;
-            double E = 0;
-            if (g) g->setZero();
-            Eigen::Matrix<double, 12, 1> ge;
-            for (int t : vt[v]) {
-              E += deform::untangle_tet_energy(X, T_, arap_rest_, t, eps, s, theta, g ? &ge : nullptr);
-              if (g)
-                for (int j = 0; j < 4; ++j)
-                  if (T_(t, j) == v) *g += ge.segment<3>(3 * j);
-            }
-            X.row(v) = keep;
-            return E;
-          };
-          const Eigen::RowVector3d p0 = X.row(v);
-          double len = 0;
-          for (int t : vt[v]) len += (X.row(T_(t, 0)) - X.row(T_(t, 1))).norm();
-          len /= std::max<size_t>(1, vt[v].size());
-          Vec3 g;
-          const double E0 = star(p0, &g);
-          Eigen::VectorXd gf(nf);
-          Eigen::MatrixXd H(nf, nf);
-          for (int a = 0; a < nf; ++a) gf[a] = g[free_axes[a]];
-          const double hstep = 1e-6 * len;
-          for (int b = 0; b < nf; ++b) {
-            Eigen::RowVector3d pp = p0, pm = p0;
-            pp[free_axes[b]] += hstep;
-            pm[free_axes[b]] -= hstep;
-            Vec3 gp, gm;
-            star(pp, &gp);
-            star(pm, &gm);
-            for (int a = 0; a < nf; ++a) H(a, b) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * hstep);
-          }
-          H = 0.5 * (H + H.transpose()).eval();
-          Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
-          Eigen::VectorXd ev = es.eigenvalues();
-          const double floor = 1e-8 * std::max(ev.cwiseAbs().maxCoeff(), 1e-300);
-          for (int a = 0; a < nf; ++a) ev[a] = std::max(std::abs(ev[a]), floor);
-          const Eigen::VectorXd df = -es.eigenvectors() * (es.eigenvectors().transpose() * gf).cwiseQuotient(ev);
-          Eigen::RowVector3d d = Eigen::RowVector3d::Zero();
-          for (int a = 0; a < nf; ++a) d[free_axes[a]] = df[a];
-          const double dn = d.norm();
-          double step = dn > 0.5 * len ? 0.5 * len / dn : 1.0;
-          const double slope = df.dot(gf);
-          if (!(slope < 0)) continue;
-          for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
-            const Eigen::RowVector3d p = p0 + step * d;
-            if (star(p, nullptr) <= E0 + 1e-4 * step * slope) {
-              X.row(v) = p;
-              break;
-            }
-          }
-        }
-      inverted = count_inverted(X, T_, arap_rest_);
-      if (inverted < best) best = inverted, since_best = 0;
-      else ++since_best;
-    }
+    const int sweeps = untangle_locally(
+        T_, arap_rest_, [&](int v, int k) { return planes_.of_vertex[k][v] >= 0; }, X, inverted, rings, max_sweeps);
     int shown = 0;
-    hooks_.debug("local untangling: " + std::to_string(sweep) + " sweeps, " + std::to_string(inverted) +
+    hooks_.debug("local untangling: " + std::to_string(sweeps) + " sweeps, " + std::to_string(inverted) +
                  " tets inverted" + (inverted > 0 && inverted < 4 ? ": " + inverted_tets(X, &shown) : std::string()));
-    return sweep;
+    return sweeps;
   }
 
   // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
@@ -1184,6 +1194,13 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     return fail(std::to_string(r.misoriented_faces) + " boundary triangles do not face their chart's direction");
   r.success = true;
   return r;
+}
+
+int untangle_tets_locally(const MatX3d& rest, const MatX4i& T, const std::array<std::vector<char>, 3>& fixed, MatX3d& X,
+                          int& inverted, int rings, int max_sweeps) {
+  const deform::ArapRest ar = deform::ArapRest::build(rest, T);
+  return untangle_locally(
+      T, ar, [&](int v, int k) { return fixed[k][v] != 0; }, X, inverted, rings, max_sweeps);
 }
 
 }  // namespace polycube::chart

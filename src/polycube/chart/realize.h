@@ -118,6 +118,15 @@ int count_misoriented(const MatX3d& X, const MatX3i& B, const std::vector<int>& 
 /// r.X) and r.misoriented_faces (triangles not facing their label's direction, or of zero area).
 void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult& r);
 
+/// Local untangling of X (tets T, reference shape rest): Gauss-Seidel sweeps over the vertices within
+/// `rings` tet rings of the inverted tets, each moved along the axes k with fixed[k][v] == 0 by a
+/// Newton step on the elliptic energy (Garanzha et al. 2021) of its tets, eps following the region's
+/// smallest volume ratio, until no tet is inverted or 30 sweeps bring no progress. The realization
+/// uses it with the planes' coordinates fixed; the hex snapping for the few tets its harmonic
+/// displacement turns over. inverted receives the tets still inverted; returns the sweeps taken.
+int untangle_tets_locally(const MatX3d& rest, const MatX4i& T, const std::array<std::vector<char>, 3>& fixed, MatX3d& X,
+                          int& inverted, int rings = 3, int max_sweeps = 300);
+
 /// Isometric distortion statistics of the map rest -> X over tets T.
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);
 

@@ -81,6 +81,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   // map of the sorted snapping (exact, but it stretches slabs between planes that do not interact).
   Snapping sn = snap_polycube(X, T, B, labels, s, true, opt.merge_thin_steps);
   r.snapping = "constrained";
+  if (sn.untangled > 0)
+    hooks.debug("constrained snapping: " + std::to_string(sn.untangled) + " tets turned over by the harmonic displacement untangled (" +
+                std::to_string(sn.untangle_sweeps) + " sweeps)");
   {
     const std::array<int, 3>& o = sn.overlap_lines;
     if (o[0] + o[1] + o[2] > 0)

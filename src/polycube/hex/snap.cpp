@@ -5,6 +5,7 @@
 #include <cmath>
 #include <set>
 
+#include "polycube/chart/realize.h"
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 
@@ -178,12 +179,14 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
   }
 
   sn.Y.resize(nv, 3);
+  std::array<std::vector<int>, 3> vplanes;  // per axis, the plane of every vertex (-1: none)
   for (int k = 0; k < 3; ++k) {
     // Planes of axis k and the plane of each of its vertices.
     std::vector<int> tris, tri_plane;
     std::vector<double>& h = sn.heights[k];
     axis_planes(X, B, labels, k, diag, tris, h, tri_plane);
-    std::vector<int> vplane(nv, -1);
+    std::vector<int>& vplane = vplanes[k];
+    vplane.assign(nv, -1);
     for (int f : tris)
       for (int j = 0; j < 3; ++j) vplane[B(f, j)] = tri_plane[f];
     const int np = static_cast<int>(h.size());
@@ -264,13 +267,33 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
     }
     for (int v = 0; v < nv; ++v) sn.Y(v, k) = vplane[v] >= 0 ? n[vplane[v]] : s * (X(v, k) - h[0]) + d[v];
   }
-  for (int t = 0; t < T.rows(); ++t) {
-    const Vec3 a = sn.Y.row(T(t, 0)), b = sn.Y.row(T(t, 1)), c = sn.Y.row(T(t, 2)), e = sn.Y.row(T(t, 3));
-    const double vol = (b - a).dot((c - a).cross(e - a)) / 6;
-    if (!(vol > 0)) {
-      ++sn.inverted;
-      sn.inverted_volume -= vol;
+  auto count_inverted = [&] {
+    sn.inverted = 0;
+    sn.inverted_volume = 0;
+    for (int t = 0; t < T.rows(); ++t) {
+      const Vec3 a = sn.Y.row(T(t, 0)), b = sn.Y.row(T(t, 1)), c = sn.Y.row(T(t, 2)), e = sn.Y.row(T(t, 3));
+      const double vol = (b - a).dot((c - a).cross(e - a)) / 6;
+      if (!(vol > 0)) {
+        ++sn.inverted;
+        sn.inverted_volume -= vol;
+      }
     }
+  };
+  count_inverted();
+  if (sn.inverted > 0) {
+    // The harmonic displacement turned a few tets over (where planes moved towards each other):
+    // untangle them locally, each plane's coordinate kept at its integer, the polycube in grid units
+    // the reference shape.
+    std::array<std::vector<char>, 3> fixed;
+    for (int k = 0; k < 3; ++k) {
+      fixed[k].assign(nv, 0);
+      for (int v = 0; v < nv; ++v) fixed[k][v] = vplanes[k][v] >= 0 || !in_tet[v];
+    }
+    const MatX3d ref = s * X;
+    int left = 0;
+    sn.untangle_sweeps = chart::untangle_tets_locally(ref, T, fixed, sn.Y, left);
+    sn.untangled = sn.inverted - left;
+    count_inverted();
   }
   return sn;
 }

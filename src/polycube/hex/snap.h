@@ -10,7 +10,8 @@
 // Snapping: planes in increasing height, n_i = max(round(s (h_i - h_min)), n_p + 1 over the planes p
 // that face i from below). Then the polycube is deformed so that every plane sits at its integer:
 // per axis, a displacement, fixed on the plane's vertices and harmonic (P1 Laplacian of the polycube
-// tet mesh) elsewhere, small because snapping moves planes by about half a cell at most.
+// tet mesh) elsewhere, small because snapping moves planes by about half a cell at most; the few tets
+// it may turn over (where planes move towards each other) are untangled locally, planes kept.
 #pragma once
 #include <array>
 #include <vector>
@@ -38,7 +39,9 @@ struct Snapping {
   /// snapping only): the polycube overlaps itself, and no hex grid can represent it.
   std::array<int, 3> overlap_lines{};
   MatX3d Y;                                    ///< polycube vertices in grid units: planes at their integers
-  int inverted = 0;                            ///< tets of Y with non-positive volume
+  int inverted = 0;                            ///< tets of Y with non-positive volume (after the untangling)
+  int untangled = 0;                           ///< tets the harmonic displacement turned over that the local untangling repaired
+  int untangle_sweeps = 0;
   double inverted_volume = 0;                  ///< their total |volume|, in cells
 };
 
