@@ -189,11 +189,22 @@ TEST(Hex, AThinStepLosesItsRiserInsteadOfGettingASquashedLayerOfHexes) {
   const hex::Snapping kept = hex::snap_polycube(X, tm.T, tm.boundary, labels, 4, true, 0.0);
   EXPECT_EQ(kept.snapped[2], (std::vector<int>{0, 2, 3}));
   EXPECT_NEAR(kept.min_slab_ratio, 0.06, 1e-9);
+  // Stretching the step to a cell, the harmonic displacement turns tets over next to it; the local
+  // untangling (planes kept at their integers) repairs every one.
+  EXPECT_GT(kept.untangled, 0);
+  EXPECT_EQ(kept.inverted, 0);
+  for (int v = 0; v < X.rows(); ++v)
+    if (std::abs(X(v, 2) - 0.515) < 1e-12) {
+      EXPECT_EQ(kept.Y(v, 2), 3.0);
+    }
+  // Merged, the riser's tets are flat (zero volume), none turned over.
+  EXPECT_LT(merged.inverted_volume, 1e-6);  // in cells
   // The hex mesh of that polycube (the map is the identity, the squashed shape the target).
   const SurfaceMesh target{X, tm.boundary};
   hex::HexOptions o;
   o.cells_per_unit = 4;
   o.pillow = "off";
+  o.merge_thin_steps = 0.25;
   const hex::HexResult r = hex::hex_mesh_from_polycube(X, tm.T, X, tm.boundary, labels, &target, o);
   // Shortest hex edge (cells are 0.25 long; the scaled Jacobian does not see flat boxes).
   auto shortest_edge = [](const hex::HexResult& h) {
