@@ -205,7 +205,9 @@ int main(int argc, char** argv) {
           q4 = c[12];
         }
         const SurfaceMesh target{tm.V, tm.boundary};
-        const hex::HexResult h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, tm.boundary, e.labels, &target, ho);
+        // After boundary-edge collapses the polycube's triangles are map_triangles (B without theirs).
+        const hex::HexResult h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, e.map_triangles(tm.boundary),
+                                                             e.map_triangle_labels(), &target, ho);
         const hex::Hausdorff hd = hex::hausdorff(h.V, hex::triangulate_quads(hex::boundary_quads(h.H)), tm.V, tm.boundary);
         Eigen::AlignedBox3d box;
         for (int v = 0; v < tm.V.rows(); ++v) box.extend(tm.V.row(v).transpose());
