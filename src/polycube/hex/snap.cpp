@@ -206,8 +206,8 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
         if (cp[i].first == cp[i + 1].first) above[cp[i].second].push_back(cp[i + 1].second);
       // Thin steps: runs of consecutive planes spanning less than merge_below cells, no two of which
       // face each other (through the volume or a gap), share one integer; their risers (the charts
-      // between them) lose their height instead of a one-cell layer of hexes being squeezed into
-      // a fraction of a cell of the input.
+      // between them) lose their height instead of getting a one-cell layer of hexes that maps
+      // into a fraction of a cell.
       std::vector<int> group(np);
       std::vector<double> hg;
       for (int p = 0; p < np;) {
@@ -281,8 +281,8 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
   };
   count_inverted();
   if (sn.inverted > 0) {
-    // The harmonic displacement turned a few tets over (where planes moved towards each other):
-    // untangle them locally, each plane's coordinate kept at its integer, the polycube in grid units
+    // The harmonic displacement turned a few tets over (where planes had to move much farther apart
+    // than the tets between them are thick, e.g. a thin step kept a cell thick): untangle them locally, each plane's coordinate kept at its integer, the polycube in grid units
     // the reference shape.
     std::array<std::vector<char>, 3> fixed;
     for (int k = 0; k < 3; ++k) {
