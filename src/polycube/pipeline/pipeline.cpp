@@ -716,10 +716,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           std::string why = "; try more hexes (--hexes)";
           if (hr.min_slab_ratio < 0.05)
             why = "; the polycube has planes " + std::to_string(hr.min_slab_ratio) +
-                  " of a cell apart that must stay a cell apart (a slab or step far thinner than a hex, " +
-                  (opt.hex.merge_thin_steps > 0 ? std::string("whose planes face each other so that --thin-steps cannot merge them")
-                                                : std::string("try --thin-steps")) +
-                  "), which stretches the map there";
+                  " of a cell apart that must stay a cell apart (a slab or step far thinner than a hex: a higher "
+                  "--thin-steps merges a step's planes unless they face each other), which stretches the map there";
           throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
                                                " hexes are inverted or degenerate after optimization (min scaled "
                                                "Jacobian " + std::to_string(hr.quality.sj_min) + ")" + why);
