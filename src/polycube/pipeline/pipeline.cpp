@@ -710,8 +710,23 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         Stopwatch sh;
         hooks.report("hex", 0);
         hooks.info("extracting hexes");
-        const hex::HexResult hr =
-            hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, opt.hex, hooks);
+        hex::HexOptions ho = opt.hex;
+        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
+        // Hexes left inverted where planes far closer than a cell were kept a cell apart: merge the
+        // planes of thicker steps and extract again (bumpy torus at 29000 grid hexes with
+        // --thin-steps 0: 6 inverted, valid once merged).
+        json retries = json::array();
+        for (double t : {0.05, 0.25}) {
+          if (hr.quality.inverted == 0) break;
+          if (t <= ho.merge_thin_steps || !(hr.min_slab_ratio < t)) continue;
+          hooks.warn(std::to_string(hr.quality.inverted) + " hexes inverted next to planes " +
+                     std::to_string(hr.min_slab_ratio) + " of a cell apart; merging the planes of steps under " +
+                     std::to_string(t) + " cells and extracting again");
+          retries.push_back({{"thin_steps", ho.merge_thin_steps}, {"inverted", hr.quality.inverted},
+                             {"sj_min", hr.quality.sj_min}});
+          ho.merge_thin_steps = t;
+          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
+        }
         if (hr.quality.inverted > 0) {
           std::string why = "; try more hexes (--hexes)";
           if (hr.min_slab_ratio < 0.05)
@@ -745,9 +760,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
                       {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
-                      {"merged_planes", hr.merged_planes},
+                      {"merged_planes", hr.merged_planes}, {"thin_steps", ho.merge_thin_steps},
                       {"min_slab_ratio", hr.min_slab_ratio}};
         hj["pillow_hexes"] = hr.pillow_hexes;
+        hj["retries"] = retries;
         hj["sharp_vertices"] = hr.sharp_vertices;
         hj["variants"] = json::array();
         for (const auto& t : hr.tried)
@@ -756,7 +772,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["extracted"].erase("sj_histogram");
         hj["smooth_moves"] = hr.smooth_moves;
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
-                         {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations}};
+                         {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
+                         {"thin_steps", opt.hex.merge_thin_steps}};
         hj["seconds"] = sh.seconds();
         report["hex"] = hj;
         report["timings"]["hex"] = sh.seconds();
