@@ -416,6 +416,7 @@ class Realizer {
     int total = 0;
     inverted = count_inverted(X, T_, arap_rest_);
     int best = inverted, since_best = 0;
+    Eigen::VectorXd best_z = z;
     constexpr int patience = 6;  // rounds without fewer inverted tets before giving up
     for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience; ++round) {
       // L-BFGS at this eps. The inverted tets are few and local: a global relative test would stop
@@ -439,12 +440,27 @@ class Realizer {
                    ", min det " + std::to_string(dmin) + ", " + std::to_string(inverted) + " inverted, " +
                    std::to_string(total) + " iterations" +
                    (inverted > 0 && inverted < 4 ? ": " + inverted_tets(Y, &inverted) : std::string()));
-      if (inverted < best) best = inverted, since_best = 0;
+      if (inverted < best) best = inverted, best_z = z, since_best = 0;
       else ++since_best;
+      // With the plane heights free and a large eps, shrinking the whole mesh costs less than
+      // untangling it (chi(0, eps) = eps / 2 is finite): rocker's eq17 start went from 5331 inverted
+      // tets to a flat mesh with 30-123k "inverted" (det ~ 0). Stop when the volume halves.
+      double vol_now = 0;
+      for (int t = 0; t < nt; ++t) vol_now += arap_rest_.w[t] * volume_ratio(Y, T_, arap_rest_, t);
+      if (vol_now < 0.5 * vol) {
+        hooks_.debug("elliptic untangling: the mesh is collapsing (volume x " + std::to_string(vol_now / vol) + "), stopped");
+        break;
+      }
       // The paper's eps update.
       const double sigma = std::max(1 - E / E0, 0.1);
       const double mu = (1 - sigma) * chi(dmin, eps);
       eps = dmin < mu ? 2 * std::sqrt(mu * (mu - dmin)) : 1e-13;
+    }
+    if (inverted > best) {
+      // Return the round with the fewest inverted tets, not a later, worse (or collapsed) state.
+      z = best_z;
+      inverted = best;
+      hooks_.debug("elliptic untangling: back to the round with " + std::to_string(best) + " inverted tets");
     }
     to_X(z, X);
     return total;
