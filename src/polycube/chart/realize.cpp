@@ -359,21 +359,28 @@ class Realizer {
   // tets and, as eps falls, penalizes them without bound; each eps is minimized by L-BFGS
   // preconditioned with the ARAP matrix (the factorizations at hand), then eps is updated by the
   // paper's rule. Stops once no tet is inverted. Returns the L-BFGS iterations taken.
-  int untangle_elliptic(MatX3d& X, int& inverted, int max_rounds = 30, int max_inner = 300) const {
+  // mode Pinned: the plane heights stay where X has them (only the other coordinates move), which
+  // also keeps the mesh from shrinking as a whole.
+  int untangle_elliptic(MatX3d& X, int& inverted, Mode mode = Mode::Reduced, int max_rounds = 30,
+                        int max_inner = 300) const {
     const int n = static_cast<int>(rest_.rows());
     const int nt = static_cast<int>(T_.rows());
+    const bool reduced = mode == Mode::Reduced;
+    const std::vector<int>* map = reduced ? red_.var : red_.fvar;
     int off[4] = {0, 0, 0, 0};
-    for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + red_.nvar[k];
+    for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + (reduced ? red_.nvar[k] : red_.nfree[k]);
     const int N = off[3];
     auto to_z = [&](const MatX3d& Y) {
       Eigen::VectorXd z = Eigen::VectorXd::Zero(N);
       for (int k = 0; k < 3; ++k)
-        for (int v = 0; v < n; ++v) z[off[k] + red_.var[k][v]] = Y(v, k);
+        for (int v = 0; v < n; ++v)
+          if (map[k][v] >= 0) z[off[k] + map[k][v]] = Y(v, k);
       return z;
     };
     auto to_X = [&](const Eigen::VectorXd& z, MatX3d& Y) {
       for (int k = 0; k < 3; ++k)
-        for (int v = 0; v < n; ++v) Y(v, k) = z[off[k] + red_.var[k][v]];
+        for (int v = 0; v < n; ++v)
+          if (map[k][v] >= 0) Y(v, k) = z[off[k] + map[k][v]];
     };
     // Scale: J / s has mean volume ratio 1.
     double vol = 0;
@@ -399,14 +406,17 @@ class Realizer {
       if (gz) {
         gz->setZero(N);
         for (int k = 0; k < 3; ++k)
-          for (int v = 0; v < n; ++v) (*gz)[off[k] + red_.var[k][v]] += gX[3 * v + k];
+          for (int v = 0; v < n; ++v)
+            if (map[k][v] >= 0) (*gz)[off[k] + map[k][v]] += gX[3 * v + k];
       }
       return E;
     };
     auto precondition = [&](const Eigen::VectorXd& q) {
       Eigen::VectorXd r(N);
-      for (int k = 0; k < 3; ++k)
-        if (red_.nvar[k] > 0) r.segment(off[k], red_.nvar[k]) = solver_[k]->solve(q.segment(off[k], red_.nvar[k]));
+      for (int k = 0; k < 3; ++k) {
+        const int m = off[k + 1] - off[k];
+        if (m > 0) r.segment(off[k], m) = (reduced ? solver_[k] : pinned_solver_[k])->solve(q.segment(off[k], m));
+      }
       return r;
     };
 
@@ -436,7 +446,8 @@ class Realizer {
       to_X(z, Y);
       inverted = count_inverted(Y, T_, arap_rest_);
       dmin = min_det(Y);
-      hooks_.debug("elliptic untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
+      hooks_.debug(std::string("elliptic untangling ") + (reduced ? "" : "(heights fixed) ") + "round " +
+                   std::to_string(round) + ": eps " + std::to_string(eps) +
                    ", min det " + std::to_string(dmin) + ", " + std::to_string(inverted) + " inverted, " +
                    std::to_string(total) + " iterations" +
                    (inverted > 0 && inverted < 4 ? ": " + inverted_tets(Y, &inverted) : std::string()));
@@ -1073,6 +1084,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       int inverted = 0;
       ut = solver.untangle(X, inverted);
       if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
+      // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them fixed.
+      if (inverted > 0) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
       if (inverted > 0) ut += solver.untangle_local(X, inverted);
       if (inverted > 0) {
         log.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
@@ -1110,6 +1123,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         int inverted = 0;
         int u2 = solver.untangle(X, inverted);
         if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted);
+        // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them fixed.
+        if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted, Mode::Pinned);
         if (inverted > 0) u2 += solver.untangle_local(X, inverted);
         log.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
                   std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
