@@ -16,7 +16,9 @@
 //      either start, if tets are still inverted (the continuation landed by force, or ARAP steps
 //      got stuck: box_hole at its default size), is untangled by the elliptic energy of Garanzha
 //      et al. 2021 (deform::untangle_energy) with the paper's eps schedule, by L-BFGS
-//      preconditioned with the ARAP matrix, planes kept exact (fandisk: 243 inverted -> 0);
+//      preconditioned with the ARAP matrix, planes kept exact (fandisk: 243 inverted -> 0), stopped
+//      if the mesh shrinks as a whole (volume halved: free heights let it) and returning its best
+//      round, then again with the plane heights fixed, then locally (untangle_tets_locally);
 //   2. ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
 //      search that keeps every tet positive, and a barrier that only acts on nearly flat tets; when
 //      a step comes out short, the next one also uses the barrier's Gauss-Newton Hessian (all axes
