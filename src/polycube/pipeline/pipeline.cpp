@@ -630,7 +630,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::write_obj(stage_path("map.obj"), map_V, surface.F);
       // Labels on the input surface and the deformed mesh too.
       io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
-      if (rr.split_edges + rr.split_faces > 0 || rr.T.rows() != tm.T.rows() || rr.T != tm.T) {
+      if (rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) {
         // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
         // tetmesh.* and polycube.* stay a map.
         MeshData tmo;
