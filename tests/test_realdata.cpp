@@ -95,6 +95,28 @@ TEST_P(RealData, LoadsAndTetrahedralizes) {
 
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealData, ::testing::ValuesIn(shared_meshes()), test_name);
 
+namespace {
+
+// report.json's polycube: exact (planar to the last bit, every triangle facing its label), no
+// inverted tet, a valid chart graph.
+void expect_exact_polycube(const nlohmann::json& p) {
+  EXPECT_EQ(p["inverted_tets"], 0);
+  EXPECT_EQ(p["planarity_error"], 0.0);
+  EXPECT_EQ(p["misoriented_faces"], 0);
+  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
+}
+
+// Runs the pipeline on a shared mesh through `until` into a fresh temp folder.
+nlohmann::json run_shared(const std::string& path, const std::string& dir, Stage until) {
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir(dir);
+  opt.until = until;
+  return run_pipeline(opt);
+}
+
+}  // namespace
+
 // The polycube deformation and extraction on small shared meshes: l1_quality below 1e-3, an exact
 // polycube with a valid chart graph and no inverted tet.
 class RealPolycube : public ::testing::TestWithParam<std::string> {};
@@ -102,19 +124,12 @@ class RealPolycube : public ::testing::TestWithParam<std::string> {};
 TEST_P(RealPolycube, ReachesAnExactPolycubeAndAValidHexMesh) {
   const std::string path = shared_dir() + "/meshes/" + GetParam();
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_polycube");
-  opt.until = Stage::Hex;
-  nlohmann::json j = run_pipeline(opt);
+  nlohmann::json j = run_shared(path, "real_polycube", Stage::Hex);
   const auto& p = j["polycube"];
   EXPECT_LT(p["l1_quality"].get<double>(), 1e-3);
   EXPECT_LT(p["deformed_arap_distortion"].get<double>(), 0.15);
   EXPECT_LT(p["arap_distortion"].get<double>(), 0.15);
-  EXPECT_EQ(p["inverted_tets"], 0);
-  EXPECT_EQ(p["planarity_error"], 0.0);
-  EXPECT_EQ(p["misoriented_faces"], 0);
-  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
+  expect_exact_polycube(p);
   const auto& h = j["hex"];
   EXPECT_EQ(h["inverted"], 0);
   EXPECT_GT(h["sj_min"].get<double>(), 0.3) << h.dump();
@@ -132,22 +147,16 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
 TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
   const std::string path = shared_dir() + "/meshes/organic/spot.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_polycube_spot");
-  opt.until = Stage::Polycube;
-  nlohmann::json j = run_pipeline(opt);
+  nlohmann::json j = run_shared(path, "real_polycube_spot", Stage::Polycube);
+  const std::string out = (test_temp_root() / "real_polycube_spot").string();
   const auto& p = j["polycube"];
-  EXPECT_EQ(p["inverted_tets"], 0);
-  EXPECT_EQ(p["planarity_error"], 0.0);
-  EXPECT_EQ(p["misoriented_faces"], 0);
-  EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
+  expect_exact_polycube(p);
   EXPECT_GE(p["edge_collapses"].get<int>(), 1);
   EXPECT_LT(p["arap_distortion"].get<double>(), 0.15);
   const std::array<int, 3> overlap = p["self_overlap_lines"].get<std::array<int, 3>>();
   EXPECT_EQ(overlap[0] + overlap[1] + overlap[2], 0);
   // map.obj: one polycube position per input vertex, all finite.
-  std::ifstream map(fs::path(opt.out_dir) / "map.obj");
+  std::ifstream map(fs::path(out) / "map.obj");
   ASSERT_TRUE(map.good());
   int vertices = 0;
   for (std::string line; std::getline(map, line);)
@@ -162,13 +171,13 @@ TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
   // tetmesh.mesh / polycube.mesh stay a map after the collapses (same tets), and the hex stage
   // builds on that pair: the snapping's harmonic displacement turns tets over there (31 on this
   // machine), which the local untangling repairs (before: the piecewise-linear fallback, 0.30).
-  const MeshData tets = io::read_mesh(opt.out_dir + "/tetmesh.mesh");
-  const MeshData cube = io::read_mesh(opt.out_dir + "/polycube.mesh");
+  const MeshData tets = io::read_mesh(out + "/tetmesh.mesh");
+  const MeshData cube = io::read_mesh(out + "/polycube.mesh");
   ASSERT_EQ(tets.T.rows(), cube.T.rows());
   EXPECT_TRUE(tets.T == cube.T);
   PipelineOptions h;
-  h.input = opt.out_dir + "/tetmesh.mesh";
-  h.polycube_map = opt.out_dir + "/polycube.mesh";
+  h.input = out + "/tetmesh.mesh";
+  h.polycube_map = out + "/polycube.mesh";
   h.out_dir = temp_dir("real_polycube_spot_hex");
   h.until = Stage::Hex;
   nlohmann::json k = run_pipeline(h);

@@ -728,19 +728,12 @@ PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const 
                                             std::string(1, "xyz"[worst_k]) + " plane of its charts (at " +
                                             std::to_string(worst_h) + "): not an axis-aligned polycube");
   // Every tet positive, every triangle facing its label.
+  int first = -1;
   for (int t = 0; t < T.rows(); ++t) {
     const Vec3 a = r.X.row(T(t, 0)), b = r.X.row(T(t, 1)), c = r.X.row(T(t, 2)), d = r.X.row(T(t, 3));
-    if (!((b - a).dot((c - a).cross(d - a)) > 0)) ++r.inverted;
+    if (!((b - a).dot((c - a).cross(d - a)) > 0) && r.inverted++ == 0) first = t;
   }
   if (r.inverted > 0) {
-    int first = 0;
-    for (int t = 0; t < T.rows(); ++t) {
-      const Vec3 a = r.X.row(T(t, 0)), b = r.X.row(T(t, 1)), c = r.X.row(T(t, 2)), d = r.X.row(T(t, 3));
-      if (!((b - a).dot((c - a).cross(d - a)) > 0)) {
-        first = t;
-        break;
-      }
-    }
     throw Error(ErrorKind::InvalidMesh, "polycube map: " + std::to_string(r.inverted) +
                                             " tets are inverted or flat in the polycube (first: tet " +
                                             std::to_string(first) + ")");
