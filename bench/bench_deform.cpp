@@ -2,7 +2,10 @@
 // the paper's Table II. Not a test: run it by hand (build/polycube_bench --help). Quotes the median
 // of --runs runs of the deformation; the extraction runs on the last one. Models of the paper use
 // the paper's beta (Table II), the others beta = 0. A second table gives the hex meshes built from
-// those polycubes (the paper's hex count as the target where it has one) beside Table II's hex columns.
+// those polycubes beside Table II's hex columns: where the paper has a hex count, the grid is aimed so
+// that the whole mesh (grid and pillow layer) comes within 5% of it. Distances: the two-sided
+// maximum (our hausdorff_rel) and the mean of the two one-sided mean distances; the paper measured
+// with M.E.S.H. and does not say which of its figures (max, mean, RMS) Table II quotes.
 #include <CLI/CLI.hpp>
 #include <algorithm>
 #include <cstdio>
@@ -206,16 +209,28 @@ int main(int argc, char** argv) {
         }
         const SurfaceMesh target{tm.V, tm.boundary};
         // After boundary-edge collapses the polycube's triangles are map_triangles (B without theirs).
-        const hex::HexResult h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, e.map_triangles(tm.boundary),
-                                                             e.map_triangle_labels(), &target, ho);
+        const MatX3i mt = e.map_triangles(tm.boundary);
+        const std::vector<int> ml = e.map_triangle_labels();
+        hex::HexResult h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
+        // The paper's counts are of the whole mesh; ours with pillowing add a boundary layer to the
+        // grid's: aim the grid so that the total comes within 5% of the paper's (two more tries).
+        const int paper_total = q1 == "-" ? 0 : std::stoi(q1);
+        double hex_seconds = h.seconds;
+        for (int k = 0; k < 2 && paper_total > 0 && std::abs(h.quality.count - paper_total) > 0.05 * paper_total; ++k) {
+          ho.target_hexes = std::max(1, static_cast<int>(std::lround(ho.target_hexes * static_cast<double>(paper_total) / h.quality.count)));
+          h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
+          hex_seconds = h.seconds;
+        }
         const hex::Hausdorff hd = hex::hausdorff(h.V, hex::triangulate_quads(hex::boundary_quads(h.H)), tm.V, tm.boundary);
         Eigen::AlignedBox3d box;
         for (int v = 0; v < tm.V.rows(); ++v) box.extend(tm.V.row(v).transpose());
+        const double d = box.diagonal().norm();
         char buf[512];
-        std::snprintf(buf, sizeof buf, "| %s | %d | %d | %.3f / %.3f / %.3f | %d | %d | %.2f | %.2f | %s | %s | %s | %s |",
+        std::snprintf(buf, sizeof buf, "| %s | %d | %d | %.3f / %.3f / %.3f | %d | %d | %.2f | %.3f | %.2f | %s | %s | %s | %s |",
                       m.file.c_str(), h.quality.count, h.pillow_hexes, h.quality.sj_min, h.quality.sj_mean,
-                      h.quality.sj_max, h.quality.inverted, h.quality.below_0_5, 1e3 * hd.max / box.diagonal().norm(),
-                      h.seconds, q1.c_str(), q2.c_str(), q3.c_str(), q4.c_str());
+                      h.quality.sj_max, h.quality.inverted, h.quality.below_0_5, 1e3 * hd.max / d,
+                      1e3 * 0.5 * (hd.mean_a_to_b + hd.mean_b_to_a) / d, hex_seconds, q1.c_str(), q2.c_str(),
+                      q3.c_str(), q4.c_str());
         hex_rows.push_back(buf);
       }
     } catch (const Error& e) {
@@ -223,8 +238,9 @@ int main(int argc, char** argv) {
     }
   }
   std::printf("\n| model | hexes | of which pillow | scaled Jacobian min / mean / max | inverted | below 0.5 | "
-              "Hausdorff (1e-3 bbox diag) | hex s | paper: hexes | SJ min / mean | SJ max | Hausdorff |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+              "Hausdorff max (1e-3 bbox diag) | mean distance (1e-3) | hex s (last try) | paper: hexes | SJ min / mean | SJ max | "
+              "Hausdorff (M.E.S.H.) |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const auto& r : hex_rows) std::printf("%s\n", r.c_str());
   return 0;
 }

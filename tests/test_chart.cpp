@@ -411,6 +411,11 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
     std::vector<int> L1 = labels;
     std::string why;
     if (chart::collapse_tet_edge(tm.V, tm.V, T1, B1, L1, u, v, &why)) {
+      // ...and in the other direction too (used below).
+      MatX4i T2 = tm.T;
+      MatX3i B2 = tm.boundary;
+      std::vector<int> L2 = labels;
+      if (!chart::collapse_tet_edge(tm.V, tm.V, T2, B2, L2, v, u, &why)) continue;
       keep = u, drop = v;
       break;
     }
@@ -436,6 +441,32 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
   EXPECT_FALSE(chart::collapse_tet_edge(tm.V, D, T, B, L, keep, drop, &why));
   EXPECT_EQ(why, "a tet would turn over in the deformed mesh");
   EXPECT_EQ(T, tm.T);
+  {
+    // Allowed to move in the deformed mesh, the merged vertex takes the other end's position or
+    // the midpoint, and every tet of the deformed mesh stays positive.
+    MatX4i T2 = T;
+    MatX3i B2 = B;
+    std::vector<int> L2 = L;
+    Vec3 at(9, 9, 9);
+    ASSERT_TRUE(chart::collapse_tet_edge(tm.V, D, T2, B2, L2, keep, drop, &why, nullptr, &at));
+    const Vec3 mid = 0.5 * (D.row(keep) + D.row(drop)).transpose();
+    EXPECT_TRUE((at - Vec3(D.row(drop).transpose())).norm() < 1e-15 || (at - mid).norm() < 1e-15);
+    EXPECT_GT((at - Vec3(D.row(keep).transpose())).norm(), 0.1);
+    MatX3d D2 = D;
+    D2.row(keep) = at.transpose();
+    for (int t = 0; t < T2.rows(); ++t) {
+      const Vec3 a = D2.row(T2(t, 0)), b = D2.row(T2(t, 1)), c = D2.row(T2(t, 2)), d = D2.row(T2(t, 3));
+      EXPECT_GT((b - a).dot((c - a).cross(d - a)), 0) << "tet " << t;
+    }
+    int both = 0;  // tets holding the edge: they go
+    for (int t = 0; t < T.rows(); ++t) {
+      bool hk = false, hd = false;
+      for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
+      both += hk && hd;
+    }
+    EXPECT_GT(both, 0);
+    EXPECT_EQ(T2.rows(), T.rows() - both);
+  }
   // The collapse itself.
   int ring = 0;
   for (int t = 0; t < T.rows(); ++t) {

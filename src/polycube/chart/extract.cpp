@@ -127,6 +127,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // the rest and deformed meshes alike) and the polycube realized again, a few rounds. The
   // realization runs on the mesh without the merged vertices; its result is given back in the
   // input's numbering, each merged vertex on its partner.
+  // The deformed mesh the retries start from: merged vertices may move (collapse_tet_edge).
+  MatX3d cur_def = T.rows() > 0 ? deformed : MatX3d();
   auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
                              const std::vector<int>& merged, const RealizeOptions& ro) {
     const int n = static_cast<int>(rest.rows());
@@ -140,7 +142,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     MatX3d R(m, 3), D(m, 3);
     for (int i = 0; i < m; ++i) {
       R.row(i) = rest.row(n2o[i]);
-      D.row(i) = deformed.row(n2o[i]);
+      D.row(i) = cur_def.row(n2o[i]);
     }
     MatX4i TT = CT;
     for (int t = 0; t < TT.rows(); ++t)
@@ -218,14 +220,25 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     for (auto [u, v] : cand) {
       if (touched[u] || touched[v]) continue;
       const bool keep_u = vlabels[u].size() >= vlabels[v].size();
-      const int keep = keep_u ? u : v, drop = keep_u ? v : u;
+      int keep = keep_u ? u : v, drop = keep_u ? v : u;
       std::string why;
       std::vector<int> rows;  // the rows of CB the collapse removes
-      if (!collapse_tet_edge(rest, deformed, CT, CB, CL, keep, drop, &why, &rows)) {
+      Vec3 at;
+      bool ok = collapse_tet_edge(rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at);
+      if (!ok) {
+        // The vertex on fewer charts kept instead (its rest position then stands for both).
+        std::string why2;
+        if (collapse_tet_edge(rest, cur_def, CT, CB, CL, drop, keep, &why2, &rows, &at)) {
+          std::swap(keep, drop);
+          ok = true;
+        }
+      }
+      if (!ok) {
         hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
                     " has both ends at one point of the polycube but cannot be collapsed: " + why);
         continue;
       }
+      cur_def.row(keep) = at.transpose();
       for (int i = static_cast<int>(rows.size()) - 1; i >= 0; --i) cb_row.erase(cb_row.begin() + rows[i]);
       merged[drop] = keep;
       touched[u] = touched[v] = 1;
@@ -534,7 +547,7 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 namespace polycube::chart {
 
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
-                       int keep, int drop, std::string* why, std::vector<int>* removed) {
+                       int keep, int drop, std::string* why, std::vector<int>* removed, Vec3* deformed_at) {
   auto refuse = [&](const char* reason) {
     if (why) *why = reason;
     return false;
@@ -574,9 +587,34 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
   };
   for (int t : star) {
     const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
-    const auto q = tet_after(t);
-    if (!(sign * volume(rest, q) > 0)) return refuse("a tet would turn over at rest");
-    if (!(sign * volume(deformed, q) > 0)) return refuse("a tet would turn over in the deformed mesh");
+    if (!(sign * volume(rest, tet_after(t)) > 0)) return refuse("a tet would turn over at rest");
+  }
+  // In the deformed mesh (only the start of the realization) the merged vertex may sit at either
+  // end or the midpoint.
+  {
+    std::vector<Vec3> at{deformed.row(keep).transpose()};
+    if (deformed_at) {
+      at.push_back(deformed.row(drop).transpose());
+      at.push_back(0.5 * (deformed.row(keep) + deformed.row(drop)).transpose());
+    }
+    bool found = false;
+    for (const Vec3& p : at) {
+      bool ok = true;
+      for (size_t i = 0; i < star.size() && ok; ++i) {
+        const int t = star[i];
+        const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
+        const auto q = tet_after(t);
+        Vec3 c[4];
+        for (int j = 0; j < 4; ++j) c[j] = q[j] == keep ? p : Vec3(deformed.row(q[j]).transpose());
+        ok = sign * tet_volume(c[0], c[1], c[2], c[3]) > 0;
+      }
+      if (ok) {
+        if (deformed_at) *deformed_at = p;
+        found = true;
+        break;
+      }
+    }
+    if (!found) return refuse("a tet would turn over in the deformed mesh");
   }
   // Link of `keep`: the triangle opposite it in each star tet.
   std::map<std::pair<int, int>, int> edge_count;

@@ -86,9 +86,13 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 /// by the boundary triangles around `keep`) and every tet of the new star is positive at rest and in
 /// `deformed`. This is the tet mesh's form of the slim-triangle collapse of Huang et al. 2014
 /// (Section 4): two boundary vertices the polycube pins to one point. why: the reason of a refusal;
-/// removed: the rows of B (before the call) that went, in increasing order.
+/// removed: the rows of B (before the call) that went, in increasing order. deformed_at: if given,
+/// the merged vertex may take, in `deformed` only, the position of `drop` or the edge's midpoint
+/// when its own would turn a tet over there (the first of the three that keeps every tet positive
+/// is written to it); without it, only its own.
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
-                       int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr);
+                       int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr,
+                       Vec3* deformed_at = nullptr);
 
 /// A polycube map given from outside (an earlier run's tetmesh.mesh / polycube.mesh pair, or another
 /// tool's): X the polycube positions of the tet mesh (rest, T; B its outward boundary). Each boundary
