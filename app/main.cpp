@@ -188,6 +188,17 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  int fit_rounds = hx.fit.rounds;
+  double fit_floor = hx.fit.quality_floor;
+  app.add_option("--fit-rounds", fit_rounds,
+                 "Hex and quad meshes: rounds of fitting to the input surface (boundary vertices slide on it "
+                 "so that it comes closer to the mesh; 0 = off)")
+      ->capture_default_str()->check(CLI::Range(0, 1000));
+  app.add_option("--fit-floor", fit_floor,
+                 "Hex and quad meshes: the fitting never takes an element around a moved vertex below this "
+                 "scaled Jacobian (or below its value before, if lower); -1: the worst element of the mesh "
+                 "before the fitting, or 0.5 if lower (the fitting keeps the minimum)")
+      ->capture_default_str()->check(CLI::Range(-1.0, 1.0));
   app.add_flag("--surface", opt.surface,
                "Surface mode (paper Sec. 5.3): no tets; the surface deforms with a surface ARAP distortion and "
                "quads come straight from the surface polycube. Accepts open surfaces (borders become "
@@ -217,6 +228,8 @@ int main(int argc, char** argv) {
 
   if (no_rotation) opt.deform.global_rotation = false;
   if (no_creases) opt.quad.capture_creases = false;
+  hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
+  hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size
   // to the hexes.
   if (!run_hex && !run_quad && app.count("--until") == 0) {

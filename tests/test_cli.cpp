@@ -354,6 +354,10 @@ TEST(Cli, QuadMeshOfTheSphere) {
   const json m = json::parse(r.output);
   EXPECT_NEAR(m["quad"]["sj_min"].get<double>(), q["sj_min"].get<double>(), 1e-12);
   EXPECT_NEAR(m["quad"]["hausdorff_rel"].get<double>(), q["hausdorff_rel"].get<double>(), 1e-12);
+  // The quads were fitted to the sphere: its points came closer, the worst quad did not drop.
+  EXPECT_GT(q["fit"]["moves"].get<int>(), 0);
+  EXPECT_LE(q["fit"]["max_distance_after_rel"].get<double>(), q["fit"]["max_distance_before_rel"].get<double>());
+  EXPECT_LT(q["fit"]["mean_distance_after_rel"].get<double>(), q["fit"]["mean_distance_before_rel"].get<double>());
 }
 
 TEST(Cli, AutoFeaturesAreExportedInTheConstraintFormat) {
@@ -466,6 +470,20 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   EXPECT_EQ(b["hex"]["inverted"], 0);
   EXPECT_GT(b["hex"]["sj_min"].get<double>(), 0.5);
   EXPECT_GT(b["hex"]["count"].get<int>(), 5000);
+  // The fitting to the surface (on by default) brings the hole's surface closer to the hexes and
+  // keeps the worst hex.
+  r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --fit-rounds 0 -q -o " + dir +
+              "/b0");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json b0 = report(dir + "/b0");
+  EXPECT_EQ(b0["hex"]["fit"]["moves"], 0);
+  EXPECT_GT(b["hex"]["fit"]["moves"].get<int>(), 0);
+  EXPECT_LT(b["hex"]["fit"]["max_distance_after_rel"].get<double>(),
+            b["hex"]["fit"]["max_distance_before_rel"].get<double>());
+  EXPECT_LT(b["hex"]["hausdorff_rel"].get<double>(), b0["hex"]["hausdorff_rel"].get<double>());
+  EXPECT_LT(b["hex"]["mean_distance_rel"].get<double>(), b0["hex"]["mean_distance_rel"].get<double>());
+  EXPECT_GE(b["hex"]["sj_min"].get<double>(), b0["hex"]["sj_min"].get<double>() - 1e-9);
+  EXPECT_EQ(b["hex"]["count"], b0["hex"]["count"]);
   // A map of another mesh is refused, naming the mismatch, and nothing is presented as a result.
   ASSERT_EQ(run_cli("--example sphere --until tet -q -o " + dir + "/c").code, 0);
   r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/c/tetmesh.mesh --hex -o " + dir + "/d");

@@ -4,6 +4,7 @@
 #include "polycube/chart/labeling.h"
 #include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/features.h"
+#include "polycube/geometry/surface_fit.h"
 #include "polycube/hex/extract.h"
 #include "polycube/quad/quad.h"
 #include "test_util.h"
@@ -87,7 +88,9 @@ TEST(Quad, FoldedQuadOnAFeatureIsUntangled) {
   const int moved = vertex_at(h.V, Eigen::RowVector3d(0, 0, 1.5));
   ASSERT_GE(moved, 0);
   h.V(moved, 2) = 1.5 + 0.4;  // beyond its neighbour at z = 1.75, still on the edge x = y = 0
-  const quad::QuadResult before = quad::quad_mesh_from_hexes(h.V, h.H, s, quad::QuadOptions{0});
+  quad::QuadOptions none;
+  none.smooth_iterations = 0;
+  const quad::QuadResult before = quad::quad_mesh_from_hexes(h.V, h.H, s, none);
   EXPECT_GT(before.quality.inverted, 0);
   const quad::QuadResult q = quad::quad_mesh_from_hexes(h.V, h.H, s);
   EXPECT_EQ(q.quality.inverted, 0);
@@ -204,4 +207,112 @@ TEST(Quad, FeatureVerticesSlideAlongTheirSharpEdge) {
     const double d = std::min({p.minCoeff(), 1 - p.maxCoeff()});
     EXPECT_NEAR(d, 0.0, 1e-9);
   }
+}
+
+namespace {
+// Open tube of radius 1 around the z axis, z in [0, 1], `seg` segments around and `rows` rows.
+SurfaceMesh tube(int seg, int rows) {
+  SurfaceMesh m;
+  m.V.resize(seg * (rows + 1), 3);
+  for (int r = 0; r <= rows; ++r)
+    for (int i = 0; i < seg; ++i) {
+      const double t = 2 * M_PI * i / seg;
+      m.V.row(r * seg + i) << std::cos(t), std::sin(t), static_cast<double>(r) / rows;
+    }
+  m.F.resize(2 * seg * rows, 3);
+  for (int r = 0; r < rows; ++r)
+    for (int i = 0; i < seg; ++i) {
+      const int a = r * seg + i, b = r * seg + (i + 1) % seg, c = a + seg, d = b + seg;
+      m.F.row(2 * (r * seg + i)) << a, b, d;
+      m.F.row(2 * (r * seg + i) + 1) << a, d, c;
+    }
+  return m;
+}
+
+// A ring of 8 quads on the tube with its vertices on the tube at uneven angles (gaps 60, 30, 45,
+// 45 degrees, twice), and the worst quad around a vertex.
+struct Ring {
+  MatX3d V;
+  MatX4i Q;
+  std::vector<std::vector<int>> vq;
+  double worst(int v) const {
+    double m = 1e300;
+    for (int q : vq[v]) {
+      std::array<Vec3, 4> p;
+      for (int j = 0; j < 4; ++j) p[j] = V.row(Q(q, j)).transpose();
+      m = std::min(m, quad::scaled_jacobian(p));
+    }
+    return m;
+  }
+};
+Ring uneven_ring() {
+  Ring r;
+  const double gaps[8] = {60, 30, 45, 45, 60, 30, 45, 45};
+  r.V.resize(16, 3);
+  double a = 0;
+  for (int i = 0; i < 8; ++i) {
+    const double t = a * M_PI / 180;
+    r.V.row(i) << std::cos(t), std::sin(t), 0;
+    r.V.row(8 + i) << std::cos(t), std::sin(t), 1;
+    a += gaps[i];
+  }
+  r.Q.resize(8, 4);
+  for (int i = 0; i < 8; ++i) r.Q.row(i) << i, (i + 1) % 8, 8 + (i + 1) % 8, 8 + i;  // outward
+  r.vq.assign(16, {});
+  for (int q = 0; q < 8; ++q)
+    for (int j = 0; j < 4; ++j) r.vq[r.Q(q, j)].push_back(q);
+  return r;
+}
+}  // namespace
+
+TEST(SurfaceFit, AnUnevenRingOnATubeEvensOutToTheBestChords) {
+  const SurfaceMesh s = tube(360, 4);
+  const geometry::TriangleTree tree(s.V, s.F);
+  Ring r = uneven_ring();
+  const std::vector<char> free_vertex(16, 1);
+  geometry::SurfaceFitOptions o;
+  o.rounds = 60;
+  o.quality_floor = 0.5;  // the default would keep the rectangles' 1: no vertex could move alone
+  const geometry::SurfaceFitStats st =
+      geometry::fit_to_surface(r.V, r.Q, s, tree, free_vertex, nullptr, [&](int v) { return r.worst(v); }, o);
+  // Before: the 60-degree chords, 1 - cos 30 = 0.134 deep; at best (8 equal chords) 1 - cos 22.5.
+  const double best = 1 - std::cos(22.5 * M_PI / 180);
+  EXPECT_NEAR(st.max_before, 1 - std::cos(30 * M_PI / 180), 2e-3);
+  EXPECT_GT(st.moves, 0);
+  EXPECT_LT(st.max_after, 1.1 * best);
+  EXPECT_GT(st.max_after, best - 2e-3);  // none can do better (up to the tube's own facets)
+  EXPECT_LT(st.mean_after, st.mean_before);
+  // Every vertex stays on the tube (within its facets' depth) and between its rims.
+  for (int v = 0; v < 16; ++v) {
+    const double rad = std::hypot(r.V(v, 0), r.V(v, 1));
+    EXPECT_NEAR(rad, 1, 1e-4) << v;
+    EXPECT_GE(r.V(v, 2), -1e-9);
+    EXPECT_LE(r.V(v, 2), 1 + 1e-9);
+  }
+  EXPECT_GT(quad::quad_quality(r.V, r.Q).sj_min, 0.5);
+}
+
+TEST(SurfaceFit, NoMoveTakesAQuadBelowTheFloor) {
+  const SurfaceMesh s = tube(360, 4);
+  const geometry::TriangleTree tree(s.V, s.F);
+  Ring r = uneven_ring();
+  // The 8 quads are rectangles (scaled Jacobian 1): a vertex moving alone makes trapezoids.
+  ASSERT_NEAR(quad::quad_quality(r.V, r.Q).sj_min, 1, 1e-12);
+  geometry::SurfaceFitOptions o;
+  o.rounds = 20;
+  o.quality_floor = 0.999;
+  std::vector<char> free_vertex(16, 1);
+  free_vertex[0] = 0;  // a vertex that stays does not move
+  const Vec3 v0 = r.V.row(0).transpose();
+  const geometry::SurfaceFitStats st =
+      geometry::fit_to_surface(r.V, r.Q, s, tree, free_vertex, nullptr, [&](int v) { return r.worst(v); }, o);
+  EXPECT_GE(quad::quad_quality(r.V, r.Q).sj_min, 0.999 - 1e-12);
+  EXPECT_LE(st.max_after, st.max_before + 1e-12);
+  EXPECT_EQ((r.V.row(0).transpose() - v0).norm(), 0.0);
+  // The default floor is the mesh's worst element before (here 1): nothing moves.
+  r = uneven_ring();
+  const geometry::SurfaceFitStats d = geometry::fit_to_surface(r.V, r.Q, s, tree, std::vector<char>(16, 1), nullptr,
+                                                               [&](int v) { return r.worst(v); });
+  EXPECT_NEAR(d.floor, 1, 1e-12);
+  EXPECT_EQ(d.moves, 0);
 }

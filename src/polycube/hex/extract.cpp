@@ -252,6 +252,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     MatX8i H;
     HexQuality extracted, quality;
     int pillow_hexes = 0, moves = 0;
+    geometry::SurfaceFitStats fit;
     std::vector<char> fixed;
     std::vector<std::array<int, 2>> slide;
   };
@@ -305,6 +306,30 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                                             opt.smooth_iterations, opt.optimize_below,
                                             report ? hooks : quiet);
     c.moves = os.laplacian_moves + os.optimized_moves;
+    if (tree && opt.fit.rounds > 0) {
+      const MatX4i Qb = boundary_quads(c.H);
+      const int n = static_cast<int>(c.V.rows());
+      std::vector<std::vector<int>> vh(n);
+      for (int h = 0; h < c.H.rows(); ++h)
+        for (int i = 0; i < 8; ++i) vh[c.H(h, i)].push_back(h);
+      std::vector<char> free_vertex(n, 0);
+      for (int q = 0; q < Qb.rows(); ++q)
+        for (int j = 0; j < 4; ++j) {
+          const int v = Qb(q, j);
+          free_vertex[v] = !fixed[v] && sl[v][0] < 0;
+        }
+      auto worst = [&](int v) {
+        double m = 1e300;
+        for (int h : vh[v]) m = std::min(m, scaled_jacobian(c.V, c.H, h));
+        return m;
+      };
+      c.fit = geometry::fit_to_surface(c.V, Qb, *target, *tree, free_vertex, patch.empty() ? nullptr : &patch, worst,
+                                       opt.fit);
+      // The inner vertices follow the fitted boundary (it stays where it is).
+      if (c.fit.moves > 0 && opt.smooth_iterations > 0)
+        optimize_hexes(c.V, c.H, fixed, sl, nullptr, nullptr, std::min(opt.smooth_iterations, 10), opt.optimize_below,
+                       quiet);
+    }
     c.quality = hex_quality(c.V, c.H);
     c.fixed = fixed;
     c.slide = sl;
@@ -341,6 +366,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   r.pillow_hexes = best.pillow_hexes;
   r.extracted = best.extracted;
   r.smooth_moves = best.moves;
+  r.fit = best.fit;
   r.grid.conservativeResize(V.rows(), 3);
   for (int v = nv; v < V.rows(); ++v) r.grid.row(v).setConstant(-1);
   {

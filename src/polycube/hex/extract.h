@@ -21,6 +21,7 @@
 
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
+#include "polycube/geometry/surface_fit.h"
 #include "polycube/hex/quality.h"
 
 namespace polycube::hex {
@@ -66,6 +67,10 @@ struct HexOptions {
   /// merged); spot: 3 merged, mean and Hausdorff a little better; rod, fandisk: no step that thin
   /// (rod at 0.25: 0.673 against 0.702). 0 = every step keeps a cell.
   double merge_thin_steps = 0.01;
+  /// After the optimization, boundary vertices off features slide on the target so that it comes
+  /// closer to the hex boundary, no hex around a moved vertex dropping below min(floor, its worst
+  /// before) (geometry/surface_fit.h; rounds = 0: off).
+  geometry::SurfaceFitOptions fit;
 };
 
 struct HexResult {
@@ -92,6 +97,7 @@ struct HexResult {
   HexQuality extracted;           ///< quality right after extraction (and projection, pillowing)
   HexQuality quality;             ///< final quality
   int smooth_moves = 0;           ///< vertex moves accepted by the smoothing
+  geometry::SurfaceFitStats fit;  ///< the fitting of the boundary to the target (target samples to hex boundary)
   double seconds = 0;
 };
 

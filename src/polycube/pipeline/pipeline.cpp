@@ -58,6 +58,17 @@ const std::vector<std::string>& output_files() {
 
 namespace {
 
+/// The fitting to the surface (geometry/surface_fit.h), distances relative to the bbox diagonal.
+json fit_json(const geometry::SurfaceFitStats& f, double diag) {
+  return {{"rounds", f.rounds},
+          {"moves", f.moves},
+          {"quality_floor", f.floor},
+          {"max_distance_before_rel", f.max_before / diag},
+          {"max_distance_after_rel", f.max_after / diag},
+          {"mean_distance_before_rel", f.mean_before / diag},
+          {"mean_distance_after_rel", f.mean_after / diag}};
+}
+
 void write_json(const fs::path& p, const json& j) {
   std::ofstream o(p);
   if (!o) throw Error(ErrorKind::Output, p.string() + ": cannot open for writing");
@@ -688,6 +699,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"hausdorff_rel", hd.max / box.diagonal().norm()},
                           {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
                           {"smooth_moves", qr.smooth_moves},
+                          {"fit", fit_json(qr.fit, box.diagonal().norm())},
                           {"creases", {{"runs", qr.crease_runs},
                                        {"captured", qr.crease_captured},
                                        {"moved_vertices", qr.crease_moved},
@@ -771,9 +783,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["extracted"] = quality_json(hr.extracted);
         hj["extracted"].erase("sj_histogram");
         hj["smooth_moves"] = hr.smooth_moves;
+        hj["fit"] = fit_json(hr.fit, diag);
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
-                         {"thin_steps", opt.hex.merge_thin_steps}};
+                         {"thin_steps", opt.hex.merge_thin_steps}, {"fit_rounds", opt.hex.fit.rounds},
+                         {"fit_floor", opt.hex.fit.quality_floor}};
         hj["seconds"] = sh.seconds();
         report["hex"] = hj;
         report["timings"]["hex"] = sh.seconds();
@@ -804,6 +818,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hex::HexOptions ho = opt.hex;
         ho.pillow = "off";
         ho.smooth_iterations = 0;
+        ho.fit.rounds = 0;  // the quads are fitted to the surface themselves
         bool report_grid_optimized = false;
         if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);

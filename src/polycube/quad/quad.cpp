@@ -294,6 +294,11 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target, const QuadOptio
   } else {
     r.creases_before = r.creases_after = geometry::crease_coverage(r.V, r.Q, target, creases);
   }
+  if (opt.fit.rounds > 0) {
+    std::vector<char> free_vertex(n, 0);
+    for (int v = 0; v < n; ++v) free_vertex[v] = !fixed[v] && (pinned.empty() || !pinned[v]);
+    r.fit = geometry::fit_to_surface(r.V, r.Q, target, tree, free_vertex, &patch_of_face, worst, opt.fit);
+  }
   for (int v = 0; v < n; ++v) r.feature_vertices += fixed[v];
   r.quality = quad_quality(r.V, r.Q);
   hooks.report("quad", 1);

@@ -11,6 +11,7 @@
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
 #include "polycube/geometry/feature_capture.h"
+#include "polycube/geometry/surface_fit.h"
 #include "polycube/hex/quality.h"
 
 namespace polycube::quad {
@@ -39,6 +40,9 @@ struct QuadOptions {
   /// Chains of sharp edges are creases to capture when one of their edges is sharper than this:
   /// the facets of a coarse smooth surface are not taken for creases (geometry::crease_edges).
   double capture_angle_deg = 45;
+  /// Last, the free vertices slide on the surface so that it comes closer to the quads
+  /// (geometry/surface_fit.h; rounds = 0: off).
+  geometry::SurfaceFitOptions fit;
 };
 
 struct QuadResult {
@@ -48,6 +52,7 @@ struct QuadResult {
   int feature_vertices = 0;      ///< vertices kept on sharp edges of the input
   QuadQuality extracted, quality;
   int smooth_moves = 0;
+  geometry::SurfaceFitStats fit;  ///< the fitting to the surface (distances from its samples to the quads)
   int crease_runs = 0;           ///< runs of sharp edges no quad edge followed after the extraction
   int crease_captured = 0;       ///< of those, runs a path of quad edges was moved onto
   int crease_moved = 0;          ///< vertices moved onto sharp edges

@@ -1,0 +1,201 @@
+#include "polycube/geometry/surface_fit.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace polycube::geometry {
+
+namespace {
+
+// Quad corners of the two triangles of quad q (faces 2q and 2q+1, split along the 0-2 diagonal).
+constexpr int kTriCorner[2][3] = {{0, 1, 2}, {0, 2, 3}};
+
+MatX3i split_quads(const MatX4i& Q) {
+  MatX3i F(2 * Q.rows(), 3);
+  for (int q = 0; q < Q.rows(); ++q)
+    for (int t = 0; t < 2; ++t)
+      for (int k = 0; k < 3; ++k) F(2 * q + t, k) = Q(q, kTriCorner[t][k]);
+  return F;
+}
+
+struct Near {
+  double dist = 0;
+  Vec3 residual = Vec3::Zero();  // sample - closest point
+  double weight_of = 0;          // bilinear-like weight of the vertex asked about in the closest point
+};
+
+}  // namespace
+
+SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
+                               const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
+                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt) {
+  SurfaceFitStats st;
+  const int n = static_cast<int>(V.rows());
+  const int nq = static_cast<int>(Q.rows());
+  if (nq == 0) return st;
+  // Samples of the target: its vertices and triangle centroids.
+  std::vector<Vec3> samples;
+  samples.reserve(target.V.rows() + target.F.rows());
+  for (int i = 0; i < target.V.rows(); ++i) samples.push_back(target.V.row(i).transpose());
+  for (int f = 0; f < target.F.rows(); ++f)
+    samples.push_back((target.V.row(target.F(f, 0)) + target.V.row(target.F(f, 1)) + target.V.row(target.F(f, 2)))
+                          .transpose() / 3.0);
+  const int ns = static_cast<int>(samples.size());
+
+  std::vector<std::vector<int>> vq(n);
+  for (int q = 0; q < nq; ++q)
+    for (int j = 0; j < 4; ++j) vq[Q(q, j)].push_back(q);
+  std::vector<int> patch(n, -1);
+  if (patch_of_face)
+    for (int v = 0; v < n; ++v)
+      if (!vq[v].empty()) patch[v] = (*patch_of_face)[tree.closest(V.row(v).transpose()).face];
+  const MatX3i QT = split_quads(Q);
+  st.floor = opt.quality_floor;
+  if (st.floor < 0) {
+    st.floor = 1e300;
+    for (int v = 0; v < n; ++v)
+      if (!vq[v].empty()) st.floor = std::min(st.floor, worst(v));
+    st.floor = std::max(st.floor, 0.5);
+  }
+
+  // Closest point of sample p among the quads `quads` at the current V, and v's weight in it.
+  auto nearest = [&](const Vec3& p, const std::vector<int>& quads, int v) {
+    Near best;
+    best.dist = 1e300;
+    for (int q : quads)
+      for (int t = 0; t < 2; ++t) {
+        const int a = Q(q, kTriCorner[t][0]), b = Q(q, kTriCorner[t][1]), c = Q(q, kTriCorner[t][2]);
+        const Vec3 pa = V.row(a).transpose(), pb = V.row(b).transpose(), pc = V.row(c).transpose();
+        const Vec3 w = closest_point_barycentric(p, pa, pb, pc);
+        const Vec3 x = w[0] * pa + w[1] * pb + w[2] * pc;
+        const double d = (p - x).norm();
+        if (d < best.dist) {
+          best.dist = d;
+          best.residual = p - x;
+          best.weight_of = (a == v ? w[0] : 0) + (b == v ? w[1] : 0) + (c == v ? w[2] : 0);
+        }
+      }
+    return best;
+  };
+  auto measure = [&](double& mx, double& mean, std::vector<int>* owner) {
+    const TriangleTree qt(V, QT);
+    mx = mean = 0;
+    if (owner) owner->assign(ns, -1);
+    for (int s = 0; s < ns; ++s) {
+      const ClosestHit h = qt.closest(samples[s]);
+      const double d = std::sqrt(h.dist2);
+      mx = std::max(mx, d);
+      mean += d;
+      if (owner) (*owner)[s] = h.face / 2;
+    }
+    mean /= std::max(1, ns);
+  };
+
+  std::vector<int> owner;
+  measure(st.max_before, st.mean_before, &owner);
+  const double p_exp = opt.power;
+  for (int round = 0; round < opt.rounds; ++round) {
+    if (round > 0) {
+      double mx, mean;
+      measure(mx, mean, &owner);
+    }
+    ++st.rounds;
+    // Samples per quad.
+    std::vector<int> start(nq + 1, 0), list(ns);
+    for (int s = 0; s < ns; ++s) ++start[owner[s] + 1];
+    for (int q = 0; q < nq; ++q) start[q + 1] += start[q];
+    {
+      std::vector<int> fill(start.begin(), start.end() - 1);
+      for (int s = 0; s < ns; ++s) list[fill[owner[s]]++] = s;
+    }
+    int moves = 0;
+    std::vector<int> S;
+    for (int v = 0; v < n; ++v) {
+      if (vq[v].empty() || v >= static_cast<int>(free_vertex.size()) || !free_vertex[v]) continue;
+      S.clear();
+      for (int q : vq[v]) S.insert(S.end(), list.begin() + start[q], list.begin() + start[q + 1]);
+      if (S.empty()) continue;
+      // Energy, largest distance and Gauss-Newton step over S at the current position.
+      double e0 = 0, m0 = 0, den = 0;
+      Vec3 num = Vec3::Zero();
+      for (int s : S) {
+        const Near nr = nearest(samples[s], vq[v], v);
+        const double w = std::pow(std::max(nr.dist, 1e-300), p_exp - 2);
+        e0 += std::pow(nr.dist, p_exp);
+        m0 = std::max(m0, nr.dist);
+        num += w * nr.weight_of * nr.residual;
+        den += w * nr.weight_of * nr.weight_of;
+      }
+      // The other side: points of v's quads (centre, edge midpoints) to the surface.
+      auto quad_side = [&](double& e, double& m, Vec3* num_out, double* den_out) {
+        for (int q : vq[v]) {
+          int j = 0;
+          while (Q(q, j) != v) ++j;
+          for (int k = 0; k < 5; ++k) {
+            // Bilinear parameters of the sample and v's weight (v is corner j).
+            static constexpr double uv[5][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
+            const double u = uv[k][0], w = uv[k][1];
+            const double b[4] = {(1 - u) * (1 - w), u * (1 - w), u * w, (1 - u) * w};
+            Vec3 x = Vec3::Zero();
+            for (int i = 0; i < 4; ++i) x += b[i] * V.row(Q(q, i)).transpose();
+            const ClosestHit h = tree.closest(x);
+            const double d = std::sqrt(h.dist2);
+            e += std::pow(d, p_exp);
+            m = std::max(m, d);
+            if (num_out && b[j] > 0) {
+              const double ww = std::pow(std::max(d, 1e-300), p_exp - 2);
+              *num_out += ww * b[j] * (h.point - x);  // the quad point moves towards the surface
+              *den_out += ww * b[j] * b[j];
+            }
+          }
+        }
+      };
+      if (opt.two_sided) quad_side(e0, m0, &num, &den);
+      if (!(den > 0) || !(m0 > 0)) continue;
+      Vec3 step = num / den;
+      Vec3 nrm = Vec3::Zero();
+      for (int q : vq[v]) {
+        const Vec3 a = V.row(Q(q, 0)), b = V.row(Q(q, 1)), c = V.row(Q(q, 2)), d = V.row(Q(q, 3));
+        nrm += (c - a).cross(d - b);
+      }
+      if (!(nrm.norm() > 0)) continue;
+      nrm.normalize();
+      step -= step.dot(nrm) * nrm;
+      double len = 0;
+      int count = 0;
+      for (int q : vq[v])
+        for (int j = 0; j < 4; ++j)
+          if (Q(q, j) == v) {
+            len += (V.row(Q(q, (j + 1) % 4)) - V.row(v)).norm() + (V.row(Q(q, (j + 3) % 4)) - V.row(v)).norm();
+            count += 2;
+          }
+      len /= std::max(1, count);
+      if (step.norm() > 0.5 * len) step *= 0.5 * len / step.norm();
+      if (!(step.norm() > 1e-12 * len)) continue;
+      const double q0 = worst(v);
+      const Vec3 x = V.row(v).transpose();
+      for (double t : {1.0, 0.5, 0.25}) {
+        const Vec3 p = tree.closest(x + t * step, &nrm, patch_of_face, patch[v]).point;
+        V.row(v) = p.transpose();
+        double e1 = 0, m1 = 0;
+        for (int s : S) {
+          const double d = nearest(samples[s], vq[v], v).dist;
+          e1 += std::pow(d, p_exp);
+          m1 = std::max(m1, d);
+        }
+        if (opt.two_sided) quad_side(e1, m1, nullptr, nullptr);
+        if (m1 <= m0 * (1 + 1e-12) && e1 < e0 * (1 - 1e-9) && worst(v) >= std::min(q0, st.floor)) {
+          ++moves;
+          break;
+        }
+        V.row(v) = x.transpose();
+      }
+    }
+    st.moves += moves;
+    if (moves == 0) break;
+  }
+  measure(st.max_after, st.mean_after, nullptr);
+  return st;
+}
+
+}  // namespace polycube::geometry

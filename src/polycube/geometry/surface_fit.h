@@ -1,0 +1,51 @@
+// Fitting the boundary of a quad or hex mesh to the surface it remeshes: vertices already on the
+// surface slide along it so that the points of the surface come closer to the quads.
+//
+// Smoothing places the vertices for element quality only; where the surface curves (fillets, holes,
+// ridges of an organic shape) the flat quads between them then cut far under it (the sagitta of a
+// chord). Here each round assigns every sample of the target surface (its vertices and triangle
+// centroids) to its closest quad (triangulated along the 0-2 diagonal, as hex::hausdorff measures)
+// and moves each free vertex, one at a time, by the Gauss-Newton step of the fitting energy
+// sum_s w_s |p_s - c_s|^2 over the samples of its quads (c_s: the sample's closest point, w_s =
+// |p_s - c_s|^(power-2), so that the farthest samples weigh most), projected on the tangent plane
+// and back onto the surface. A move is kept only when, over the samples of the vertex's quads, the
+// largest distance does not grow and the power sum drops, and when the worst element around the
+// vertex (the caller's measure: quads or hexes) stays at or above min(its value before, floor).
+#pragma once
+#include <functional>
+#include <vector>
+
+#include "polycube/core/types.h"
+#include "polycube/geometry/closest_point.h"
+
+namespace polycube::geometry {
+
+struct SurfaceFitOptions {
+  int rounds = 8;               ///< fitting rounds (0 = off); each visits every free vertex once
+  double power = 4;             ///< distances are fitted in this power (2 = least squares)
+  /// A move never takes the worst element around a vertex below min(floor, its value before).
+  /// floor = quality_floor when >= 0; by default (< 0) the worst element of the whole mesh before
+  /// the fitting, or 0.5 if that is lower: the fitting never lowers the mesh's minimum quality.
+  double quality_floor = -1;
+  /// Also fit the quads to the surface: the centre and edge midpoints of a vertex's quads, measured
+  /// to the surface, join its energy and its largest distance (the other side of the Hausdorff distance).
+  bool two_sided = true;
+};
+
+struct SurfaceFitStats {
+  int rounds = 0;
+  int moves = 0;
+  double floor = 0;                        ///< the quality floor used
+  double max_before = 0, max_after = 0;    ///< largest sample-to-quads distance before and after
+  double mean_before = 0, mean_after = 0;  ///< mean sample-to-quads distance
+};
+
+/// V: vertex positions (moved in place); Q: the boundary quads over V (outward). free_vertex[v]:
+/// v may move (a vertex of Q not on a feature). target/tree: the surface and its tree; with
+/// patch_of_face (one id per target triangle), a vertex stays on the smooth patch it starts on.
+/// worst(v): the worst element quality around v at the current V (quads or hexes).
+SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
+                               const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
+                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt = {});
+
+}  // namespace polycube::geometry
