@@ -167,6 +167,10 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   bool no_cleanup = false;
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
+  app.add_option("--collapsed-ratio", opt.polycube.collapsed_ratio,
+                 "Polycube labels: boundary triangles whose deformed area is below this fraction of the median "
+                 "deformed/rest area ratio take their neighbours' label (their normal is unreliable); 0 = off")
+      ->capture_default_str()->check(CLI::Range(0.0, 0.5));
   bool no_rotation = false;
   app.add_flag("--no-rotation", no_rotation, "Polycube deformation: keep the input orientation (no global rotation, Eq. 3)");
   bool run_hex = false;

@@ -224,6 +224,18 @@ TEST(Cli, VolumeBoostOption) {
   EXPECT_EQ(run_cli("--example sphere --until deform --volume-boost 0.5 -q -o " + out).code, 2);
 }
 
+TEST(Cli, CollapsedRatioOption) {
+  // The value reaches the extraction (reported) and a larger one still gives an exact polycube;
+  // out of range: exit 2.
+  std::string out = temp_dir("collapsed_ratio");
+  RunResult r = run_cli("--example box_hole --until polycube --collapsed-ratio 0.3 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_DOUBLE_EQ(j["polycube"]["cleanup"]["collapsed_ratio"].get<double>(), 0.3);
+  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --collapsed-ratio 0.6 -q -o " + out).code, 2);
+}
+
 namespace {
 // Boundary faces of a polycube tet mesh read back: each has one coordinate along its label's axis.
 double planarity_spread(const MeshData& m, const std::vector<int>& labels) {

@@ -522,7 +522,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
                        {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite},
                        {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
-                       {"relabelled_faces", ex.cleanup.relabelled_faces}};
+                       {"relabelled_faces", ex.cleanup.relabelled_faces},
+                       {"collapsed_ratio", opt.polycube.collapsed_ratio}};
       if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
         // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
         // axes (a polycube edge), a flat one when they share the label.
