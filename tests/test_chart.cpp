@@ -504,6 +504,72 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
   EXPECT_EQ(relabelled, L);
 }
 
+// A fan of 12 triangles on the plane z = 0 coned to an apex below: a closed tet mesh (12 tets)
+// whose top edge a-b can be collapsed onto neither end (each end's star has a triangle the other
+// end lies beyond: a at x = 0, b at x = 1, their neighbours y at x = 0.2 and y' at x = 0.8 with
+// p1 = (0.5, 0.1) between) but onto its midpoint.
+TEST(Chart, CollapseTetEdgeMayMoveTheMergedVertexToTheMidpointAtRest) {
+  MatX3d V(11, 3);
+  enum { a, b, p1, p2, y, yr, yb, ybr, l, r, o };
+  V << 0, 0, 0, 1, 0, 0, 0.5, 0.1, 0, 0.5, -0.1, 0, 0.2, 0.5, 0, 0.8, 0.5, 0, 0.2, -0.5, 0, 0.8, -0.5, 0, -0.5, 0, 0,
+      1.5, 0, 0, 0.5, 0, -1;
+  const std::vector<std::array<int, 3>> top{{a, b, p1},  {a, p1, y},  {a, y, l},    {a, l, yb},
+                                            {a, yb, p2}, {a, p2, b},  {b, yr, p1},  {b, r, yr},
+                                            {b, ybr, r}, {b, p2, ybr}, {p1, yr, y}, {p2, yb, ybr}};
+  const std::vector<std::array<int, 2>> rim{{y, l}, {l, yb}, {yb, ybr}, {ybr, r}, {r, yr}, {yr, y}};
+  MatX4i T(top.size(), 4);
+  MatX3i B(top.size() + rim.size(), 3);
+  for (size_t i = 0; i < top.size(); ++i) {
+    // Counter-clockwise seen from above: the tet (i, k, j, apex) is positive.
+    const auto& f = top[i];
+    T.row(i) << f[0], f[2], f[1], o;
+    B.row(i) << f[0], f[1], f[2];
+  }
+  for (size_t i = 0; i < rim.size(); ++i) B.row(top.size() + i) << rim[i][1], rim[i][0], o;
+  ASSERT_EQ(measure_tets(V, T).inverted, 0);
+  ASSERT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
+  const std::vector<int> labels(B.rows(), 4);
+  for (auto [keep, drop] : {std::pair{int(a), int(b)}, std::pair{int(b), int(a)}}) {
+    // Onto either end: refused, nothing changed.
+    MatX4i T1 = T;
+    MatX3i B1 = B;
+    std::vector<int> L1 = labels;
+    std::string why;
+    EXPECT_FALSE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why));
+    EXPECT_EQ(why, "a tet would turn over at rest");
+    EXPECT_EQ(T1, T);
+    // Allowed to move at rest: onto the midpoint, every remaining tet positive there.
+    Vec3 at, rest_at(9, 9, 9);
+    ASSERT_TRUE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why, nullptr, &at, &rest_at)) << why;
+    EXPECT_LT((rest_at - Vec3(0.5, 0, 0)).norm(), 1e-15);
+    EXPECT_EQ(T1.rows(), T.rows() - 2);
+    EXPECT_EQ(B1.rows(), B.rows() - 2);
+    MatX3d V1 = V;
+    V1.row(keep) = rest_at.transpose();
+    V1.row(drop).setConstant(1e3);  // referenced by nothing any more
+    const auto q = measure_tets(V1, T1);
+    EXPECT_EQ(q.inverted, 0);
+    EXPECT_EQ(q.zero_volume, 0);
+    EXPECT_EQ(sorted_faces(tet_boundary(T1)), sorted_faces(B1));
+  }
+  // A deformed state in which no place of the merged vertex keeps its star positive (here the
+  // mirror image: every tet is turned over): refused, unless the caller will untangle it, in
+  // which case the merged vertex takes the deformed midpoint.
+  MatX3d D = V;
+  D.col(0) *= -1;
+  MatX4i T1 = T;
+  MatX3i B1 = B;
+  std::vector<int> L1 = labels;
+  std::string why;
+  Vec3 at, rest_at;
+  EXPECT_FALSE(chart::collapse_tet_edge(V, D, T1, B1, L1, a, b, &why, nullptr, &at, &rest_at));
+  EXPECT_EQ(why, "a tet would turn over in the deformed mesh");
+  EXPECT_EQ(T1, T);
+  ASSERT_TRUE(chart::collapse_tet_edge(V, D, T1, B1, L1, a, b, &why, nullptr, &at, &rest_at, true));
+  EXPECT_LT((at - Vec3(-0.5, 0, 0)).norm(), 1e-15);
+  EXPECT_EQ(T1.rows(), T.rows() - 2);
+}
+
 TEST(Realize, GivenPolycubeMapIsLabelledFlattenedAndChecked) {
   auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
   TetMesh tm = tet_mesh_of(b.V, b.F);

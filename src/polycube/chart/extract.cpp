@@ -129,6 +129,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // input's numbering, each merged vertex on its partner.
   // The deformed mesh the retries start from: merged vertices may move (collapse_tet_edge).
   MatX3d cur_def = T.rows() > 0 ? deformed : MatX3d();
+  // The rest mesh the retries use: a kept vertex may move to the collapsed edge's midpoint.
+  MatX3d cur_rest = T.rows() > 0 ? rest : MatX3d();
   auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
                              const std::vector<int>& merged, const RealizeOptions& ro) {
     const int n = static_cast<int>(rest.rows());
@@ -141,7 +143,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     const int m = static_cast<int>(n2o.size());
     MatX3d R(m, 3), D(m, 3);
     for (int i = 0; i < m; ++i) {
-      R.row(i) = rest.row(n2o[i]);
+      R.row(i) = cur_rest.row(n2o[i]);
       D.row(i) = cur_def.row(n2o[i]);
     }
     MatX4i TT = CT;
@@ -223,14 +225,46 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       int keep = keep_u ? u : v, drop = keep_u ? v : u;
       std::string why;
       std::vector<int> rows;  // the rows of CB the collapse removes
-      Vec3 at;
-      bool ok = collapse_tet_edge(rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at);
+      Vec3 at, rest_at;
+      bool ok = collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at);
       if (!ok) {
-        // The vertex on fewer charts kept instead (its rest position then stands for both).
+        // The vertex on fewer charts kept instead.
         std::string why2;
-        if (collapse_tet_edge(rest, cur_def, CT, CB, CL, drop, keep, &why2, &rows, &at)) {
+        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, drop, keep, &why2, &rows, &at, &rest_at)) {
           std::swap(keep, drop);
           ok = true;
+        }
+      }
+      // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
+      // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
+      // is only where the realization starts, so the merged vertex goes to the midpoint and the
+      // tets around it are untangled locally; if that fails, the collapse is undone.
+      MatX3d untangled;
+      if (!ok && why == "a tet would turn over in the deformed mesh") {
+        const MatX4i CT0 = CT;
+        const MatX3i CB0 = CB;
+        const std::vector<int> CL0 = CL;
+        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true)) {
+          MatX3d R = cur_rest;
+          R.row(keep) = rest_at.transpose();
+          untangled = cur_def;
+          untangled.row(keep) = at.transpose();
+          untangled.row(drop) = at.transpose();
+          std::array<std::vector<char>, 3> fixed;
+          for (auto& f : fixed) f.assign(untangled.rows(), 0);
+          int left = 0;
+          untangle_tets_locally(R, CT, fixed, untangled, left);
+          if (left == 0) {
+            ok = true;
+            hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
+                        ": the deformed mesh untangled around the merged vertex");
+          } else {
+            CT = CT0;
+            CB = CB0;
+            CL = CL0;
+            why = "a tet would turn over in the deformed mesh, and " + std::to_string(left) +
+                  " stay inverted after local untangling";
+          }
         }
       }
       if (!ok) {
@@ -238,7 +272,17 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                     " has both ends at one point of the polycube but cannot be collapsed: " + why);
         continue;
       }
-      cur_def.row(keep) = at.transpose();
+      if (untangled.rows() > 0) {
+        cur_def = std::move(untangled);  // the merged vertex where the untangling left it
+      } else {
+        cur_def.row(keep) = at.transpose();
+      }
+      if ((rest_at - Vec3(cur_rest.row(keep).transpose())).norm() > 0)
+        hooks.debug("the merged vertex " + std::to_string(keep) + " moves at rest too, to " +
+                    std::to_string((rest_at - Vec3(cur_rest.row(keep).transpose())).norm() /
+                                   (cur_rest.row(drop) - cur_rest.row(keep)).norm()) +
+                    " of the way to the other end");
+      cur_rest.row(keep) = rest_at.transpose();
       for (int i = static_cast<int>(rows.size()) - 1; i >= 0; --i) cb_row.erase(cb_row.begin() + rows[i]);
       merged[drop] = keep;
       touched[u] = touched[v] = 1;
@@ -547,7 +591,8 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 namespace polycube::chart {
 
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
-                       int keep, int drop, std::string* why, std::vector<int>* removed, Vec3* deformed_at) {
+                       int keep, int drop, std::string* why, std::vector<int>* removed, Vec3* deformed_at,
+                       Vec3* rest_at, bool deformed_may_tangle) {
   auto refuse = [&](const char* reason) {
     if (why) *why = reason;
     return false;
@@ -585,34 +630,70 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
     return tet_volume(P.row(q[0]).transpose(), P.row(q[1]).transpose(), P.row(q[2]).transpose(),
                       P.row(q[3]).transpose());
   };
-  for (int t : star) {
-    const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
-    if (!(sign * volume(rest, tet_after(t)) > 0)) return refuse("a tet would turn over at rest");
+  // At rest the merged vertex stays where `keep` is or, with rest_at, may take the edge's midpoint,
+  // `drop`'s position or a quarter point (the first that keeps every tet positive): it stays on
+  // the input surface's edge.
+  auto positive_with = [&](const MatX3d& P, const Vec3& p) {
+    for (int t : star) {
+      const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
+      const auto q = tet_after(t);
+      Vec3 c[4];
+      for (int j = 0; j < 4; ++j) c[j] = q[j] == keep ? p : Vec3(P.row(q[j]).transpose());
+      if (!(sign * tet_volume(c[0], c[1], c[2], c[3]) > 0)) return false;
+    }
+    return true;
+  };
+  {
+    std::vector<Vec3> at{rest.row(keep).transpose()};
+    if (rest_at) {
+      const Vec3 k = rest.row(keep).transpose(), d = rest.row(drop).transpose();
+      at.push_back(0.5 * (k + d));
+      at.push_back(d);
+      at.push_back(0.75 * k + 0.25 * d);
+      at.push_back(0.25 * k + 0.75 * d);
+    }
+    bool found = false;
+    for (const Vec3& p : at)
+      if (positive_with(rest, p)) {
+        if (rest_at) *rest_at = p;
+        found = true;
+        break;
+      }
+    if (!found) return refuse("a tet would turn over at rest");
   }
   // In the deformed mesh (only the start of the realization) the merged vertex may sit at either
-  // end or the midpoint.
+  // end, the midpoint, the quarter points, or off the edge towards the centroid of the star's other
+  // vertices (humanoid: a chart-border vertex and a corner 0.025 apart in the deformed mesh, whose
+  // merged vertex turned a tet over at both ends and the midpoint).
   {
     std::vector<Vec3> at{deformed.row(keep).transpose()};
     if (deformed_at) {
-      at.push_back(deformed.row(drop).transpose());
-      at.push_back(0.5 * (deformed.row(keep) + deformed.row(drop)).transpose());
+      const Vec3 k = deformed.row(keep).transpose(), d = deformed.row(drop).transpose(), mid = 0.5 * (k + d);
+      at.push_back(d);
+      at.push_back(mid);
+      at.push_back(0.75 * k + 0.25 * d);
+      at.push_back(0.25 * k + 0.75 * d);
+      Vec3 centroid = Vec3::Zero();
+      int count = 0;
+      for (int t : star)
+        for (int j = 0; j < 4; ++j)
+          if (T(t, j) != keep && T(t, j) != drop) centroid += deformed.row(T(t, j)).transpose(), ++count;
+      if (count > 0) {
+        centroid /= count;
+        for (double w : {0.25, 0.5, 0.75, 1.0}) at.push_back((1 - w) * mid + w * centroid);
+      }
     }
     bool found = false;
     for (const Vec3& p : at) {
-      bool ok = true;
-      for (size_t i = 0; i < star.size() && ok; ++i) {
-        const int t = star[i];
-        const double sign = volume(rest, {T(t, 0), T(t, 1), T(t, 2), T(t, 3)}) > 0 ? 1.0 : -1.0;
-        const auto q = tet_after(t);
-        Vec3 c[4];
-        for (int j = 0; j < 4; ++j) c[j] = q[j] == keep ? p : Vec3(deformed.row(q[j]).transpose());
-        ok = sign * tet_volume(c[0], c[1], c[2], c[3]) > 0;
-      }
-      if (ok) {
+      if (positive_with(deformed, p)) {
         if (deformed_at) *deformed_at = p;
         found = true;
         break;
       }
+    }
+    if (!found && deformed_may_tangle && deformed_at) {
+      *deformed_at = 0.5 * (deformed.row(keep) + deformed.row(drop)).transpose();
+      found = true;
     }
     if (!found) return refuse("a tet would turn over in the deformed mesh");
   }

@@ -87,12 +87,18 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 /// `deformed`. This is the tet mesh's form of the slim-triangle collapse of Huang et al. 2014
 /// (Section 4): two boundary vertices the polycube pins to one point. why: the reason of a refusal;
 /// removed: the rows of B (before the call) that went, in increasing order. deformed_at: if given,
-/// the merged vertex may take, in `deformed` only, the position of `drop` or the edge's midpoint
-/// when its own would turn a tet over there (the first of the three that keeps every tet positive
-/// is written to it); without it, only its own.
+/// the merged vertex may take, in `deformed` only, the position of `drop`, the edge's midpoint, a
+/// quarter point, or a point between the midpoint and the centroid of the star's other vertices
+/// when its own would turn a tet over there (the first of these that keeps every tet positive is
+/// written to it); without it, only its own. rest_at: the same at rest, on the edge only (keep's
+/// own position, the midpoint, drop's position, the quarter points); callers then move `keep`
+/// there in their rest mesh. Where the stars of both ends are not convex enough for either
+/// end (humanoid: both orders refused), the midpoint often is. deformed_may_tangle (with
+/// deformed_at): when no position keeps the deformed star positive, collapse anyway with the
+/// merged vertex at the deformed midpoint (the caller untangles the deformed mesh there).
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
                        int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr,
-                       Vec3* deformed_at = nullptr);
+                       Vec3* deformed_at = nullptr, Vec3* rest_at = nullptr, bool deformed_may_tangle = false);
 
 /// A polycube map given from outside (an earlier run's tetmesh.mesh / polycube.mesh pair, or another
 /// tool's): X the polycube positions of the tet mesh (rest, T; B its outward boundary). Each boundary
