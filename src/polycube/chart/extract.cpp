@@ -1,6 +1,7 @@
 #include "polycube/chart/extract.h"
 
 #include <algorithm>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <set>
@@ -190,15 +191,36 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   };
   // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
   // point (where admissible); returns how many.
-  auto try_collapse = [&]() -> int {
+  // With `folded` (the last resort, once relabelling has come to nothing): when no tet is inverted
+  // but a few boundary triangles face away from their label, the shortest edge of each is
+  // collapsed too (surface mode's repair of folded triangles; humanoid ended with one such
+  // triangle, its relabelling undone by the cleanup).
+  auto try_collapse = [&](bool folded = false) -> int {
     const RealizeResult& r = e.realized;
-    if (T.rows() == 0 || r.success || r.inverted == 0 || r.inverted > opt.max_relabel_inverted || r.X.rows() == 0 ||
-        r.T.rows() == 0 || collapse_rounds >= opt.tet_collapse_rounds)
+    const bool fold_case = folded && r.inverted == 0 && r.misoriented_faces > 0 &&
+                           r.misoriented_faces <= opt.max_folded_collapses;
+    if (T.rows() == 0 || r.success || (r.inverted == 0 && !fold_case) || r.inverted > opt.max_relabel_inverted ||
+        r.X.rows() == 0 || r.T.rows() == 0 || collapse_rounds >= opt.tet_collapse_rounds)
       return 0;
     const int n = static_cast<int>(rest.rows());
     const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
     const auto bedges = unique_edges(CB);
     std::vector<std::pair<int, int>> cand;
+    if (fold_case)
+      for (int f = 0; f < CB.rows(); ++f) {
+        const Vec3 a = r.X.row(CB(f, 0)), b = r.X.row(CB(f, 1)), c = r.X.row(CB(f, 2));
+        if ((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag) continue;
+        int best = 0;
+        double shortest = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+          const double len = (r.X.row(CB(f, k)) - r.X.row(CB(f, (k + 1) % 3))).norm();
+          if (len < shortest) shortest = len, best = k;
+        }
+        const int u = CB(f, best), v = CB(f, (best + 1) % 3);
+        cand.emplace_back(std::min(u, v), std::max(u, v));
+        hooks.debug("folded triangle " + std::to_string(cb_row[f]) + ": its shortest edge " + std::to_string(u) +
+                    "-" + std::to_string(v) + " is a collapse candidate");
+      }
     for (int t : inverted_tets(r)) {
       for (int a = 0; a < 4; ++a)
         for (int b = a + 1; b < 4; ++b) {
@@ -420,7 +442,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   if (T.rows() == 0 && retried) repair_surface();
   // Tet mode: the relabelling may end (or not start: too many misoriented triangles) in a state
   // with pinned edges too.
-  while (try_collapse() > 0) realize_after_collapse();
+  while (try_collapse(true) > 0) realize_after_collapse();
   if (collapses > 0) {
     sync_labels();
     e.edge_collapses = collapses;

@@ -30,8 +30,13 @@ struct ExtractOptions {
   int max_relabel_faces = 100;
   /// Tet mode: when the realization (after the relabelling) still leaves tets inverted where it
   /// pins the two ends of a boundary edge to one point, that edge is collapsed (collapse_tet_edge)
-  /// and the polycube realized again, at most this many rounds; 0 = off.
-  int tet_collapse_rounds = 3;
+  /// and the polycube realized again, at most this many rounds; 0 = off. (humanoid, 72k tets:
+  /// 16 collapses in 5 rounds leave no tet inverted, where 3 rounds left 3.)
+  int tet_collapse_rounds = 8;
+  /// Last resort, when relabelling has come to nothing and no tet is inverted: if at most this
+  /// many boundary triangles face away from their label, the shortest edge of each is collapsed
+  /// the same way (within tet_collapse_rounds).
+  int max_folded_collapses = 10;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };
