@@ -206,6 +206,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
     const auto bedges = unique_edges(CB);
     std::vector<std::pair<int, int>> cand;
+    std::set<std::pair<int, int>> of_folds;  // candidates that are the shortest edge of a folded triangle
     if (fold_case)
       for (int f = 0; f < CB.rows(); ++f) {
         const Vec3 a = r.X.row(CB(f, 0)), b = r.X.row(CB(f, 1)), c = r.X.row(CB(f, 2));
@@ -218,6 +219,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         }
         const int u = CB(f, best), v = CB(f, (best + 1) % 3);
         cand.emplace_back(std::min(u, v), std::max(u, v));
+        of_folds.insert(cand.back());
         hooks.debug("folded triangle " + std::to_string(cb_row[f]) + ": its shortest edge " + std::to_string(u) +
                     "-" + std::to_string(v) + " is a collapse candidate");
       }
@@ -310,7 +312,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       touched[u] = touched[v] = 1;
       ++made;
       hooks.debug("collapsed boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
-                  ": the polycube put both ends at one point");
+                  (of_folds.count({u, v}) ? ": the shortest edge of a folded triangle"
+                                          : ": the polycube put both ends at one point"));
     }
     if (made > 0) {
       ++collapse_rounds;
