@@ -191,6 +191,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   };
   // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
   // point (where admissible); returns how many.
+  // Whether row f of CB faces away from its label (or has no area) in the polycube X (diag: X's
+  // bounding-box diagonal).
+  auto faces_away = [&](const MatX3d& X, int f, double diag) {
+    const Vec3 a = X.row(CB(f, 0)), b = X.row(CB(f, 1)), c = X.row(CB(f, 2));
+    return !((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag);
+  };
   // With `folded` (the last resort, once relabelling has come to nothing): when no tet is inverted
   // but a few boundary triangles face away from their label, the shortest edge of each is
   // collapsed too (surface mode's repair of folded triangles; humanoid ended with one such
@@ -209,8 +215,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     std::set<std::pair<int, int>> of_folds;  // candidates that are the shortest edge of a folded triangle
     if (fold_case)
       for (int f = 0; f < CB.rows(); ++f) {
-        const Vec3 a = r.X.row(CB(f, 0)), b = r.X.row(CB(f, 1)), c = r.X.row(CB(f, 2));
-        if ((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag) continue;
+        if (!faces_away(r.X, f, diag)) continue;
         int best = 0;
         double shortest = std::numeric_limits<double>::infinity();
         for (int k = 0; k < 3; ++k) {
@@ -371,8 +376,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     std::vector<char> bad(CB.rows(), 0);
     int nbad = 0;
     for (int f = 0; f < CB.rows(); ++f) {
+      if (!faces_away(X, f, diag)) continue;
       const Vec3 a = X.row(CB(f, 0)), b = X.row(CB(f, 1)), c = X.row(CB(f, 2));
-      if ((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag) continue;
       bad[f] = 1;
       ++nbad;
       hooks.debug("misoriented triangle " + std::to_string(cb_row[f]) + " (" + std::to_string(CB(f, 0)) + " " +
