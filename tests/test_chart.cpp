@@ -379,6 +379,61 @@ TEST(Realize, AutoKeepsTheBetterOfTheTwoStartsRunSideBySide) {
   EXPECT_LE((e.realized.X - X[best]).cwiseAbs().maxCoeff(), 1e-6);
 }
 
+TEST(Realize, PreviousStartRepairsAFewInvertedTetsOfAnEarlierResult) {
+  // The retries of extract_polycube start from the failed realization's state ("previous"): on
+  // or near the planes, a few tets inverted. Here: box_hole's exact polycube with one interior
+  // vertex pushed through its star's far side and the plane vertices nudged off their planes.
+  // The previous start lands them, untangles locally and minimizes ARAP: the same polycube.
+  MeshData m = examples::make("box_hole", 0.04);
+  TetMesh tm = tet_mesh_of(m.V, m.F);
+  auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  chart::ExtractOptions opt;
+  opt.realize.start = "continuation";
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  expect_exact_polycube(e, tm);
+  const int n = static_cast<int>(tm.V.rows());
+  MatX3d start = e.realized.X.topRows(n);
+  std::vector<char> on_boundary(n, 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int j = 0; j < 3; ++j) on_boundary[tm.boundary(f, j)] = 1;
+  // The interior vertex with the most tets, moved to twice the distance of its farthest neighbour.
+  std::vector<int> valence(n, 0);
+  for (int t = 0; t < tm.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) valence[tm.T(t, j)]++;
+  int v = -1;
+  for (int i = 0; i < n; ++i)
+    if (!on_boundary[i] && (v < 0 || valence[i] > valence[v])) v = i;
+  ASSERT_GE(v, 0);
+  Vec3 far = start.row(v).transpose();
+  for (int t = 0; t < tm.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j)
+      if (tm.T(t, j) == v)
+        for (int k = 0; k < 4; ++k) {
+          const Vec3 p = start.row(tm.T(t, k)).transpose();
+          if ((p - start.row(v).transpose()).norm() > (far - start.row(v).transpose()).norm()) far = p;
+        }
+  start.row(v) = (2 * far - start.row(v).transpose()).transpose();
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1e-4, 1e-4);
+  for (int i = 0; i < n; ++i)
+    if (on_boundary[i])
+      for (int k = 0; k < 3; ++k) start(i, k) += u(rng);
+  ASSERT_GT(measure_tets(start, tm.T).inverted, 0);
+  chart::RealizeOptions ro;
+  ro.start = "previous";
+  const auto r = chart::realize_polycube(tm.V, tm.T, tm.boundary, start, e.labels, ro);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(r.start, "previous");
+  EXPECT_EQ(r.inverted, 0);
+  EXPECT_EQ(r.planarity_error, 0.0);
+  EXPECT_EQ(max_planarity_spread(r.X, tm.boundary, e.labels), 0.0);
+  EXPECT_EQ(measure_tets(r.X, r.T).inverted, 0);
+  EXPECT_NEAR(r.arap, e.realized.arap, 0.02 * e.realized.arap);
+  EXPECT_EQ(r.planes[0], e.realized.planes[0]);
+  EXPECT_EQ(r.planes[1], e.realized.planes[1]);
+  EXPECT_EQ(r.planes[2], e.realized.planes[2]);
+}
+
 namespace {
 
 std::set<std::array<int, 3>> sorted_faces(const MatX3i& B) {

@@ -186,7 +186,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   std::vector<int> merged(rest.rows(), -1);
   int collapses = 0, collapse_rounds = 0;
   auto realize_current = [&](const RealizeOptions& ro) {
-    return collapses == 0 ? realize_polycube(rest, T, B, deformed, CL, ro, hooks)
+    return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
   };
   // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
@@ -332,6 +332,29 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // The retries keep to the continuation start, the one that got every tet positive (when
   // both starts were tried, the eq17 start mostly fails after a long untangling).
   auto realize_again = [&] {
+    if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= rest.rows()) {
+      // From the failed realization's state (every vertex of the input numbering; a merged one
+      // sits where its partner is).
+      RealizeOptions ro = opt.realize;
+      ro.start = "previous";
+      MatX3d from_deformed = std::move(cur_def);
+      cur_def = e.realized.X.topRows(rest.rows());
+      RealizeResult warm = realize_current(ro);
+      cur_def = std::move(from_deformed);
+      // Kept when it succeeds or leaves fewer tets inverted (or as many, and fewer triangles facing
+      // away from their label) than before: the next retry starts from it. Otherwise the deformed
+      // mesh is realized again.
+      const bool better = warm.X.rows() > 0 && (warm.inverted < e.realized.inverted ||
+                                                (warm.inverted == e.realized.inverted &&
+                                                 warm.misoriented_faces < e.realized.misoriented_faces));
+      if (warm.success || better) {
+        hooks.debug("realization from the previous one's state: " +
+                    (warm.success ? std::string("success") : warm.failure));
+        e.realized = std::move(warm);
+        return;
+      }
+      hooks.debug("realization from the previous one's state: " + warm.failure + "; again from the deformed mesh");
+    }
     RealizeOptions ro = opt.realize;
     if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
     e.realized = realize_current(ro);

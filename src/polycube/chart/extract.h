@@ -37,6 +37,12 @@ struct ExtractOptions {
   /// many boundary triangles face away from their label, the shortest edge of each is collapsed
   /// the same way (within tet_collapse_rounds).
   int max_folded_collapses = 10;
+  /// Retries (after edge collapses or relabelling) first start from the failed realization's
+  /// state, with the collapsed edges' tets gone or the relabelled triangles' vertices moved to
+  /// their new planes (RealizeOptions start "previous": untangled, then ARAP), and from the
+  /// deformed mesh again only if that fails: one untangling instead of the continuation's path
+  /// and a second start per retry.
+  bool warm_retries = true;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };

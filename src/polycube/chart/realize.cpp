@@ -1051,7 +1051,9 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   std::vector<std::string> starts;
   if (opt.start == "continuation" || opt.start == "auto") starts.push_back("continuation");
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
-  if (starts.empty()) return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto)");
+  if (opt.start == "previous") starts.push_back("previous");
+  if (starts.empty())
+    return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto, previous)");
   const double diag0 = (def.colwise().maxCoeff() - def.colwise().minCoeff()).norm();
   // Boundary triangles not facing their label's direction (or of zero area) in X.
   auto misoriented = [&](const MatX3d& X) {
@@ -1076,22 +1078,36 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     Attempt a;
     MatX3d X = def;
     int ut = 0;
-    if (name == "eq17") {
-      if (!relax_eq17(B, T, planes, X)) {
-        a.failure = "the relaxation of Eq. 17 failed";
-        return a;
-      }
+    if (name == "eq17" || name == "previous") {
       int inverted = 0;
-      ut = solver.untangle(X, inverted);
-      if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
-      // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them fixed.
-      if (inverted > 0) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
-      if (inverted > 0) ut += solver.untangle_local(X, inverted);
+      if (name == "previous") {
+        // An earlier realization's state, on the planes but for moved heights, with at most a few
+        // tets inverted: untangled where they are (a global ARAP step or the elliptic untangling
+        // with free heights would undo what that realization reached: humanoid, 5 inverted after
+        // landing, 5324 after them).
+        solver.land(X);
+        inverted = count_inverted(X, T, solver.arap_rest());
+        log.debug("previous realization landed on the planes: " + std::to_string(inverted) + " tets inverted");
+        if (inverted > 0) ut += solver.untangle_local(X, inverted);
+      } else {
+        if (!relax_eq17(B, T, planes, X)) {
+          a.failure = "the relaxation of Eq. 17 failed";
+          return a;
+        }
+        ut = solver.untangle(X, inverted);
+        if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
+      }
+      // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them
+      // fixed. (Not after the previous start: its few inverted tets are flat, det ~ 0, where the
+      // elliptic energy's eps schedule has nothing to work with.)
+      if (inverted > 0 && name == "eq17") ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
+      if (inverted > 0 && name == "eq17") ut += solver.untangle_local(X, inverted);
       if (inverted > 0) {
-        log.debug("realization from the eq17 start: " + std::to_string(inverted) + " tets still inverted after " +
-                  std::to_string(ut) + " untangling steps");
+        log.debug("realization from the " + name + " start: " + std::to_string(inverted) +
+                  " tets still inverted after " + std::to_string(ut) + " untangling steps");
         a.failure = std::to_string(inverted) + " tets remain inverted after " + std::to_string(ut) +
-                    " untangling steps from the relaxation of Eq. 17";
+                    (name == "eq17" ? " untangling steps from the relaxation of Eq. 17"
+                                    : " untangling steps from the previous realization");
         a.tangled = std::move(X);
         a.inverted = inverted;
         return a;
