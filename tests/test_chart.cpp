@@ -625,6 +625,92 @@ TEST(Chart, CollapseTetEdgeMayMoveTheMergedVertexToTheMidpointAtRest) {
   EXPECT_EQ(T1.rows(), T.rows() - 2);
 }
 
+TEST(Chart, CollapseTetEdgeRefusedAtRestEverywhereOnTheEdgeMayTangleForTheCallerToUntangle) {
+  // The fan of the test above with p1 and p2 moved (p1 towards a, p2 towards b): no place on the
+  // edge (ends, midpoint, quarter points) keeps every tet positive at rest. With rest_may_tangle
+  // the collapse is made with the merged vertex at the midpoint, for the caller to untangle the
+  // rest mesh's interior there (here every vertex is on the boundary, so the test stops at that).
+  MatX3d V(11, 3);
+  enum { a, b, p1, p2, y, yr, yb, ybr, l, r, o };
+  V << 0, 0, 0, 1, 0, 0, 0.2, 0.25, 0, 0.72, -0.22, 0, 0.2, 0.5, 0, 0.8, 0.5, 0, 0.2, -0.5, 0, 0.8, -0.5, 0, -0.5, 0,
+      0, 1.5, 0, 0, 0.5, 0, -1;
+  const std::vector<std::array<int, 3>> top{{a, b, p1},  {a, p1, y},  {a, y, l},    {a, l, yb},
+                                            {a, yb, p2}, {a, p2, b},  {b, yr, p1},  {b, r, yr},
+                                            {b, ybr, r}, {b, p2, ybr}, {p1, yr, y}, {p2, yb, ybr}};
+  const std::vector<std::array<int, 2>> rim{{y, l}, {l, yb}, {yb, ybr}, {ybr, r}, {r, yr}, {yr, y}};
+  MatX4i T(top.size(), 4);
+  MatX3i B(top.size() + rim.size(), 3);
+  for (size_t i = 0; i < top.size(); ++i) {
+    const auto& f = top[i];
+    T.row(i) << f[0], f[2], f[1], o;
+    B.row(i) << f[0], f[1], f[2];
+  }
+  for (size_t i = 0; i < rim.size(); ++i) B.row(top.size() + i) << rim[i][1], rim[i][0], o;
+  ASSERT_EQ(measure_tets(V, T).inverted, 0);
+  const std::vector<int> labels(B.rows(), 4);
+  for (auto [keep, drop] : {std::pair{int(a), int(b)}, std::pair{int(b), int(a)}}) {
+    MatX4i T1 = T;
+    MatX3i B1 = B;
+    std::vector<int> L1 = labels;
+    std::string why;
+    Vec3 at, rest_at;
+    EXPECT_FALSE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why, nullptr, &at, &rest_at));
+    EXPECT_EQ(why, "a tet would turn over at rest");
+    EXPECT_EQ(T1, T);
+    ASSERT_TRUE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why, nullptr, &at, &rest_at, true, true))
+        << why;
+    EXPECT_LT((rest_at - Vec3(0.5, 0, 0)).norm(), 1e-15);
+    EXPECT_EQ(T1.rows(), T.rows() - 2);
+    EXPECT_EQ(sorted_faces(tet_boundary(T1)), sorted_faces(B1));
+    MatX3d V1 = V;
+    V1.row(keep) = rest_at.transpose();
+    EXPECT_GT(measure_tets(V1, T1).inverted + measure_tets(V1, T1).zero_volume, 0);
+  }
+}
+
+TEST(Realize, LocalUntanglingWithAPerTetReferenceKeepsTheBoundary) {
+  // The rest mesh's repair after such a collapse: each tet's reference is its own shape before
+  // (a soup of tets), the boundary vertices fixed, the interior ones free. An interior vertex of
+  // a box's tet mesh pushed through its star: untangled, the boundary unchanged.
+  auto b = grid_box(3);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  const int n = static_cast<int>(tm.V.rows());
+  MatX3d soup(4 * tm.T.rows(), 3);
+  MatX4i ST(tm.T.rows(), 4);
+  for (int t = 0; t < tm.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) soup.row(4 * t + j) = tm.V.row(tm.T(t, j)), ST(t, j) = 4 * t + j;
+  const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
+  std::array<std::vector<char>, 3> fixed;
+  for (auto& f : fixed) f.assign(n, 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int j = 0; j < 3; ++j)
+      for (auto& x : fixed) x[tm.boundary(f, j)] = 1;
+  int v = -1;
+  for (int i = 0; i < n && v < 0; ++i)
+    if (!fixed[0][i]) v = i;
+  ASSERT_GE(v, 0) << "no interior vertex";
+  MatX3d X = tm.V;
+  // Through the far side of its star: to the reflection of itself in its farthest neighbour.
+  Vec3 far = X.row(v).transpose();
+  for (int t = 0; t < tm.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j)
+      if (tm.T(t, j) == v)
+        for (int k = 0; k < 4; ++k)
+          if ((X.row(tm.T(t, k)) - X.row(v)).norm() > (far - Vec3(X.row(v).transpose())).norm())
+            far = X.row(tm.T(t, k)).transpose();
+  X.row(v) = (1.5 * far - 0.5 * Vec3(X.row(v).transpose())).transpose();
+  ASSERT_GT(measure_tets(X, tm.T).inverted, 0);
+  int left = -1;
+  chart::untangle_tets_locally(reference, tm.T, fixed, X, left);
+  EXPECT_EQ(left, 0);
+  EXPECT_EQ(measure_tets(X, tm.T).inverted, 0);
+  EXPECT_EQ(measure_tets(X, tm.T).zero_volume, 0);
+  for (int i = 0; i < n; ++i)
+    if (fixed[0][i]) {
+      EXPECT_EQ((X.row(i) - tm.V.row(i)).norm(), 0.0) << "boundary vertex " << i << " moved";
+    }
+}
+
 TEST(Realize, GivenPolycubeMapIsLabelledFlattenedAndChecked) {
   auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
   TetMesh tm = tet_mesh_of(b.V, b.F);

@@ -268,31 +268,67 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
       // is only where the realization starts, so the merged vertex goes to the midpoint and the
       // tets around it are untangled locally; if that fails, the collapse is undone.
-      MatX3d untangled;
-      if (!ok && why == "a tet would turn over in the deformed mesh") {
+      // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
+      // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
+      // is only where the realization starts, so the merged vertex goes to the midpoint and the
+      // tets around it are untangled locally. Refused at rest (tet/hand: slivers at both ends):
+      // the merged vertex goes to the edge's midpoint, on the input surface, and the rest mesh's
+      // interior vertices around it are untangled (the input volume stays the same, only its
+      // tetrahedralization moves). If either untangling fails, the collapse is undone.
+      MatX3d untangled, rest_untangled;
+      if (!ok && (why == "a tet would turn over in the deformed mesh" || why == "a tet would turn over at rest")) {
         const MatX4i CT0 = CT;
         const MatX3i CB0 = CB;
         const std::vector<int> CL0 = CL;
-        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true)) {
+        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true, true)) {
+          // Reference shape per tet: its rest shape before the collapse (every one positive).
+          MatX3d soup(4 * CT.rows(), 3);
+          MatX4i ST(CT.rows(), 4);
+          Eigen::Index i = 0;
+          for (int t = 0; t < CT0.rows(); ++t) {
+            bool hk = false, hd = false;
+            for (int j = 0; j < 4; ++j) hk |= CT0(t, j) == keep, hd |= CT0(t, j) == drop;
+            if (hk && hd) continue;  // gone with the edge
+            for (int j = 0; j < 4; ++j) soup.row(4 * i + j) = cur_rest.row(CT0(t, j)), ST(i, j) = static_cast<int>(4 * i + j);
+            ++i;
+          }
+          const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
+          std::array<std::vector<char>, 3> fixed;
+          for (auto& f : fixed) f.assign(cur_rest.rows(), 0);
           MatX3d R = cur_rest;
           R.row(keep) = rest_at.transpose();
-          untangled = cur_def;
-          untangled.row(keep) = at.transpose();
-          untangled.row(drop) = at.transpose();
-          std::array<std::vector<char>, 3> fixed;
-          for (auto& f : fixed) f.assign(untangled.rows(), 0);
+          int left_rest = 0;
+          if (measure_tets(R, CT).inverted + measure_tets(R, CT).zero_volume > 0) {
+            std::array<std::vector<char>, 3> boundary;
+            for (auto& f : boundary) f.assign(cur_rest.rows(), 0);
+            for (int f = 0; f < CB.rows(); ++f)
+              for (int j = 0; j < 3; ++j)
+                for (auto& b : boundary) b[CB(f, j)] = 1;
+            untangle_tets_locally(reference, CT, boundary, R, left_rest);
+            if (left_rest == 0) rest_untangled = R;
+          }
           int left = 0;
-          untangle_tets_locally(R, CT, fixed, untangled, left);
-          if (left == 0) {
+          if (left_rest == 0) {
+            untangled = cur_def;
+            untangled.row(keep) = at.transpose();
+            untangled.row(drop) = at.transpose();
+            untangle_tets_locally(R, CT, fixed, untangled, left);
+          }
+          if (left_rest == 0 && left == 0) {
             ok = true;
-            hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) +
-                        ": the deformed mesh untangled around the merged vertex");
+            hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) + ": " +
+                        (rest_untangled.rows() > 0 ? "the rest mesh's interior untangled around the merged vertex"
+                                                   : "the deformed mesh untangled around the merged vertex"));
           } else {
             CT = CT0;
             CB = CB0;
             CL = CL0;
-            why = "a tet would turn over in the deformed mesh, and " + std::to_string(left) +
-                  " stay inverted after local untangling";
+            untangled.resize(0, 3);
+            rest_untangled.resize(0, 3);
+            why = left_rest > 0 ? "a tet would turn over at rest, and " + std::to_string(left_rest) +
+                                      " stay inverted after untangling the rest mesh's interior"
+                                : "a tet would turn over in the deformed mesh, and " + std::to_string(left) +
+                                      " stay inverted after local untangling";
           }
         }
       }
@@ -311,6 +347,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                     std::to_string((rest_at - Vec3(cur_rest.row(keep).transpose())).norm() /
                                    (cur_rest.row(drop) - cur_rest.row(keep)).norm()) +
                     " of the way to the other end");
+      if (rest_untangled.rows() > 0) cur_rest = std::move(rest_untangled);
       cur_rest.row(keep) = rest_at.transpose();
       for (int i = static_cast<int>(rows.size()) - 1; i >= 0; --i) cb_row.erase(cb_row.begin() + rows[i]);
       merged[drop] = keep;
@@ -645,7 +682,7 @@ namespace polycube::chart {
 
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
                        int keep, int drop, std::string* why, std::vector<int>* removed, Vec3* deformed_at,
-                       Vec3* rest_at, bool deformed_may_tangle) {
+                       Vec3* rest_at, bool deformed_may_tangle, bool rest_may_tangle) {
   auto refuse = [&](const char* reason) {
     if (why) *why = reason;
     return false;
@@ -712,6 +749,10 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
         found = true;
         break;
       }
+    if (!found && rest_may_tangle && rest_at) {
+      *rest_at = 0.5 * (rest.row(keep) + rest.row(drop)).transpose();
+      found = true;
+    }
     if (!found) return refuse("a tet would turn over at rest");
   }
   // In the deformed mesh (only the start of the realization) the merged vertex may sit at either

@@ -107,9 +107,12 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 /// end (humanoid: both orders refused), the midpoint often is. deformed_may_tangle (with
 /// deformed_at): when no position keeps the deformed star positive, collapse anyway with the
 /// merged vertex at the deformed midpoint (the caller untangles the deformed mesh there).
+/// rest_may_tangle (with rest_at): the same at rest, the merged vertex at the edge's midpoint (on
+/// the input surface); the caller then untangles the rest mesh's interior vertices around it.
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
                        int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr,
-                       Vec3* deformed_at = nullptr, Vec3* rest_at = nullptr, bool deformed_may_tangle = false);
+                       Vec3* deformed_at = nullptr, Vec3* rest_at = nullptr, bool deformed_may_tangle = false,
+                       bool rest_may_tangle = false);
 
 /// A polycube map given from outside (an earlier run's tetmesh.mesh / polycube.mesh pair, or another
 /// tool's): X the polycube positions of the tet mesh (rest, T; B its outward boundary). Each boundary

@@ -1245,9 +1245,14 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
 
 int untangle_tets_locally(const MatX3d& rest, const MatX4i& T, const std::array<std::vector<char>, 3>& fixed, MatX3d& X,
                           int& inverted, int rings, int max_sweeps) {
-  const deform::ArapRest ar = deform::ArapRest::build(rest, T);
+  return untangle_tets_locally(deform::ArapRest::build(rest, T), T, fixed, X, inverted, rings, max_sweeps);
+}
+
+int untangle_tets_locally(const deform::ArapRest& reference, const MatX4i& T,
+                          const std::array<std::vector<char>, 3>& fixed, MatX3d& X, int& inverted, int rings,
+                          int max_sweeps) {
   return untangle_locally(
-      T, ar, [&](int v, int k) { return fixed[k][v] != 0; }, X, inverted, rings, max_sweeps);
+      T, reference, [&](int v, int k) { return fixed[k][v] != 0; }, X, inverted, rings, max_sweeps);
 }
 
 }  // namespace polycube::chart

@@ -34,6 +34,7 @@
 
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
+#include "polycube/deform/energies.h"
 
 namespace polycube::chart {
 
@@ -131,6 +132,11 @@ void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult&
 /// displacement turns over. inverted receives the tets still inverted; returns the sweeps taken.
 int untangle_tets_locally(const MatX3d& rest, const MatX4i& T, const std::array<std::vector<char>, 3>& fixed, MatX3d& X,
                           int& inverted, int rings = 3, int max_sweeps = 300);
+/// The same with the reference shape given per tet (deform::ArapRest of any positive tets, e.g.
+/// each tet's shape before an edge collapse moved one of its vertices).
+int untangle_tets_locally(const deform::ArapRest& reference, const MatX4i& T,
+                          const std::array<std::vector<char>, 3>& fixed, MatX3d& X, int& inverted, int rings = 3,
+                          int max_sweeps = 300);
 
 /// Isometric distortion statistics of the map rest -> X over tets T.
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);
