@@ -368,6 +368,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   };
   // The retries keep to the continuation start, the one that got every tet positive (when
   // both starts were tried, the eq17 start mostly fails after a long untangling).
+  int warm_kept = 0;  // failed retries from an earlier state kept as the next one's start
   auto realize_again = [&] {
     if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= rest.rows()) {
       // From the failed realization's state (every vertex of the input numbering; a merged one
@@ -385,6 +386,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                                                 (warm.inverted == e.realized.inverted &&
                                                  warm.misoriented_faces < e.realized.misoriented_faces));
       if (warm.success || better) {
+        warm_kept += !warm.success;
         hooks.debug("realization from the previous one's state: " +
                     (warm.success ? std::string("success") : warm.failure));
         e.realized = std::move(warm);
@@ -522,6 +524,16 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       e.realized.failure += " (after " + std::to_string(collapses) +
                             " collapses of boundary edges whose ends it pinned to one point)";
     }
+  }
+  if (!e.realized.success && warm_kept > 0) {
+    // The retries from earlier states took a path that ended without a polycube (humanoid, from
+    // the CLI's deformation: stuck at an edge that cannot be collapsed); the retries from the
+    // deformed mesh may take another.
+    hooks.debug("no polycube after " + std::to_string(warm_kept) +
+                " retries kept from earlier realizations' states; the retries again, each from the deformed mesh");
+    ExtractOptions cold = opt;
+    cold.warm_retries = false;
+    return extract_polycube(rest, T, B, deformed, cold, hooks);
   }
   return e;
 }

@@ -41,7 +41,9 @@ struct ExtractOptions {
   /// state, with the collapsed edges' tets gone or the relabelled triangles' vertices moved to
   /// their new planes (RealizeOptions start "previous": untangled, then ARAP), and from the
   /// deformed mesh again only if that fails: one untangling instead of the continuation's path
-  /// and a second start per retry.
+  /// and a second start per retry. A failed retry that leaves fewer tets inverted (or as many and
+  /// fewer triangles facing away) is kept as the next one's start; if the extraction then ends
+  /// without a polycube, the retries are run again from the start, each from the deformed mesh.
   bool warm_retries = true;
   CleanupOptions cleanup;
   RealizeOptions realize;
