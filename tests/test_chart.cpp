@@ -307,19 +307,29 @@ TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {
   EXPECT_FALSE(N.x() > 1e-12) << "the odd triangle should not face +X";
 }
 
-TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
-  // The relaxation of Eq. 17 inverts tets around the hole; plain ARAP steps left one inverted
-  // there, the elliptic untangling (Garanzha et al. 2021) removes them all.
+namespace {
+
+// box_hole (surface edge 0.04) tetrahedralized, deformed and realized from the given start.
+std::pair<TetMesh, chart::PolycubeExtraction> box_hole_realized(const std::string& start) {
   MeshData m = examples::make("box_hole", 0.04);
   TetMesh tm = tet_mesh_of(m.V, m.F);
   auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
   chart::ExtractOptions opt;
-  opt.realize.start = "eq17";
-  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  opt.realize.start = start;
+  auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  return {std::move(tm), std::move(e)};
+}
+
+}  // namespace
+
+TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
+  // The relaxation of Eq. 17 inverts tets around the hole; plain ARAP steps left one inverted
+  // there, the elliptic untangling (Garanzha et al. 2021) removes them all.
+  const auto [tm, e] = box_hole_realized("eq17");
   expect_exact_polycube(e, tm);
   EXPECT_EQ(e.realized.start, "eq17");
   // More steps than the plain ARAP untangling may take: the elliptic untangling ran.
-  EXPECT_GT(e.realized.untangle_iterations, opt.realize.untangle_iterations);
+  EXPECT_GT(e.realized.untangle_iterations, chart::RealizeOptions{}.untangle_iterations);
 }
 
 TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {
@@ -379,17 +389,29 @@ TEST(Realize, AutoKeepsTheBetterOfTheTwoStartsRunSideBySide) {
   EXPECT_LE((e.realized.X - X[best]).cwiseAbs().maxCoeff(), 1e-6);
 }
 
+namespace {
+
+// Moves vertex v of X through the far side of its star: past its farthest neighbour by `beyond`
+// times their distance.
+void push_through_star(const MatX4i& T, int v, double beyond, MatX3d& X) {
+  const Vec3 p = X.row(v).transpose();
+  Vec3 far = p;
+  for (int t = 0; t < T.rows(); ++t)
+    for (int j = 0; j < 4; ++j)
+      if (T(t, j) == v)
+        for (int k = 0; k < 4; ++k)
+          if ((Vec3(X.row(T(t, k)).transpose()) - p).norm() > (far - p).norm()) far = X.row(T(t, k)).transpose();
+  X.row(v) = (far + beyond * (far - p)).transpose();
+}
+
+}  // namespace
+
 TEST(Realize, PreviousStartRepairsAFewInvertedTetsOfAnEarlierResult) {
   // The retries of extract_polycube start from the failed realization's state ("previous"): on
   // or near the planes, a few tets inverted. Here: box_hole's exact polycube with one interior
   // vertex pushed through its star's far side and the plane vertices nudged off their planes.
   // The previous start lands them, untangles locally and minimizes ARAP: the same polycube.
-  MeshData m = examples::make("box_hole", 0.04);
-  TetMesh tm = tet_mesh_of(m.V, m.F);
-  auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
-  chart::ExtractOptions opt;
-  opt.realize.start = "continuation";
-  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  const auto [tm, e] = box_hole_realized("continuation");
   expect_exact_polycube(e, tm);
   const int n = static_cast<int>(tm.V.rows());
   MatX3d start = e.realized.X.topRows(n);
@@ -404,15 +426,7 @@ TEST(Realize, PreviousStartRepairsAFewInvertedTetsOfAnEarlierResult) {
   for (int i = 0; i < n; ++i)
     if (!on_boundary[i] && (v < 0 || valence[i] > valence[v])) v = i;
   ASSERT_GE(v, 0);
-  Vec3 far = start.row(v).transpose();
-  for (int t = 0; t < tm.T.rows(); ++t)
-    for (int j = 0; j < 4; ++j)
-      if (tm.T(t, j) == v)
-        for (int k = 0; k < 4; ++k) {
-          const Vec3 p = start.row(tm.T(t, k)).transpose();
-          if ((p - start.row(v).transpose()).norm() > (far - start.row(v).transpose()).norm()) far = p;
-        }
-  start.row(v) = (2 * far - start.row(v).transpose()).transpose();
+  push_through_star(tm.T, v, 1.0, start);
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(-1e-4, 1e-4);
   for (int i = 0; i < n; ++i)
@@ -559,28 +573,76 @@ TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
   EXPECT_EQ(relabelled, L);
 }
 
+namespace {
+
+// A fan of 12 triangles on the plane z = 0 (a = (0,0), b = (1,0), p1 and p2 between them, a
+// hexagonal rim around) coned to an apex o = (0.5, 0, -1): a closed tet mesh of 12 tets.
+struct Fan {
+  enum Vertex { a, b, p1, p2, y, yr, yb, ybr, l, r, o };
+  MatX3d V;
+  MatX4i T;
+  MatX3i B;
+};
+Fan make_fan(const Vec3& at_p1, const Vec3& at_p2) {
+  using enum Fan::Vertex;
+  Fan f;
+  f.V.resize(11, 3);
+  f.V << 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0.2, 0.5, 0, 0.8, 0.5, 0, 0.2, -0.5, 0, 0.8, -0.5, 0, -0.5, 0, 0, 1.5,
+      0, 0, 0.5, 0, -1;
+  f.V.row(p1) = at_p1.transpose();
+  f.V.row(p2) = at_p2.transpose();
+  const std::vector<std::array<int, 3>> top{{a, b, p1},  {a, p1, y},  {a, y, l},    {a, l, yb},
+                                            {a, yb, p2}, {a, p2, b},  {b, yr, p1},  {b, r, yr},
+                                            {b, ybr, r}, {b, p2, ybr}, {p1, yr, y}, {p2, yb, ybr}};
+  const std::vector<std::array<int, 2>> rim{{y, l}, {l, yb}, {yb, ybr}, {ybr, r}, {r, yr}, {yr, y}};
+  f.T.resize(static_cast<Eigen::Index>(top.size()), 4);
+  f.B.resize(static_cast<Eigen::Index>(top.size() + rim.size()), 3);
+  for (size_t i = 0; i < top.size(); ++i) {
+    // Counter-clockwise seen from above: the tet (i, k, j, apex) is positive.
+    const auto& t = top[i];
+    f.T.row(i) << t[0], t[2], t[1], o;
+    f.B.row(i) << t[0], t[1], t[2];
+  }
+  for (size_t i = 0; i < rim.size(); ++i) f.B.row(top.size() + i) << rim[i][1], rim[i][0], o;
+  return f;
+}
+
+struct Collapsed {
+  MatX4i T;
+  MatX3i B;
+  Vec3 at, rest_at;
+};
+// The collapse of the fan's edge (keep, drop) with the deformed state D: refused with `expected`
+// (nothing changed) unless the caller will untangle (the deformed mesh; the rest one too with
+// rest_tangle), then made.
+Collapsed refused_unless_tangle_allowed(const Fan& fan, const MatX3d& D, int keep, int drop, const std::string& expected,
+                                        bool rest_tangle) {
+  Collapsed c{fan.T, fan.B, Vec3::Zero(), Vec3::Zero()};
+  std::vector<int> labels(fan.B.rows(), 4);
+  std::string why;
+  EXPECT_FALSE(chart::collapse_tet_edge(fan.V, D, c.T, c.B, labels, keep, drop, &why, nullptr, &c.at, &c.rest_at));
+  EXPECT_EQ(why, expected);
+  EXPECT_EQ(c.T, fan.T);
+  EXPECT_TRUE(chart::collapse_tet_edge(fan.V, D, c.T, c.B, labels, keep, drop, &why, nullptr, &c.at, &c.rest_at, true,
+                                       rest_tangle))
+      << why;
+  EXPECT_EQ(c.T.rows(), fan.T.rows() - 2);
+  EXPECT_EQ(c.B.rows(), fan.B.rows() - 2);
+  return c;
+}
+
+}  // namespace
+
 // A fan of 12 triangles on the plane z = 0 coned to an apex below: a closed tet mesh (12 tets)
 // whose top edge a-b can be collapsed onto neither end (each end's star has a triangle the other
 // end lies beyond: a at x = 0, b at x = 1, their neighbours y at x = 0.2 and y' at x = 0.8 with
 // p1 = (0.5, 0.1) between) but onto its midpoint.
 TEST(Chart, CollapseTetEdgeMayMoveTheMergedVertexToTheMidpointAtRest) {
-  MatX3d V(11, 3);
-  enum { a, b, p1, p2, y, yr, yb, ybr, l, r, o };
-  V << 0, 0, 0, 1, 0, 0, 0.5, 0.1, 0, 0.5, -0.1, 0, 0.2, 0.5, 0, 0.8, 0.5, 0, 0.2, -0.5, 0, 0.8, -0.5, 0, -0.5, 0, 0,
-      1.5, 0, 0, 0.5, 0, -1;
-  const std::vector<std::array<int, 3>> top{{a, b, p1},  {a, p1, y},  {a, y, l},    {a, l, yb},
-                                            {a, yb, p2}, {a, p2, b},  {b, yr, p1},  {b, r, yr},
-                                            {b, ybr, r}, {b, p2, ybr}, {p1, yr, y}, {p2, yb, ybr}};
-  const std::vector<std::array<int, 2>> rim{{y, l}, {l, yb}, {yb, ybr}, {ybr, r}, {r, yr}, {yr, y}};
-  MatX4i T(top.size(), 4);
-  MatX3i B(top.size() + rim.size(), 3);
-  for (size_t i = 0; i < top.size(); ++i) {
-    // Counter-clockwise seen from above: the tet (i, k, j, apex) is positive.
-    const auto& f = top[i];
-    T.row(i) << f[0], f[2], f[1], o;
-    B.row(i) << f[0], f[1], f[2];
-  }
-  for (size_t i = 0; i < rim.size(); ++i) B.row(top.size() + i) << rim[i][1], rim[i][0], o;
+  using enum Fan::Vertex;
+  const Fan fan = make_fan(Vec3(0.5, 0.1, 0), Vec3(0.5, -0.1, 0));
+  const MatX3d& V = fan.V;
+  const MatX4i& T = fan.T;
+  const MatX3i& B = fan.B;
   ASSERT_EQ(measure_tets(V, T).inverted, 0);
   ASSERT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
   const std::vector<int> labels(B.rows(), 4);
@@ -612,17 +674,8 @@ TEST(Chart, CollapseTetEdgeMayMoveTheMergedVertexToTheMidpointAtRest) {
   // which case the merged vertex takes the deformed midpoint.
   MatX3d D = V;
   D.col(0) *= -1;
-  MatX4i T1 = T;
-  MatX3i B1 = B;
-  std::vector<int> L1 = labels;
-  std::string why;
-  Vec3 at, rest_at;
-  EXPECT_FALSE(chart::collapse_tet_edge(V, D, T1, B1, L1, a, b, &why, nullptr, &at, &rest_at));
-  EXPECT_EQ(why, "a tet would turn over in the deformed mesh");
-  EXPECT_EQ(T1, T);
-  ASSERT_TRUE(chart::collapse_tet_edge(V, D, T1, B1, L1, a, b, &why, nullptr, &at, &rest_at, true));
-  EXPECT_LT((at - Vec3(-0.5, 0, 0)).norm(), 1e-15);
-  EXPECT_EQ(T1.rows(), T.rows() - 2);
+  const Collapsed c = refused_unless_tangle_allowed(fan, D, a, b, "a tet would turn over in the deformed mesh", false);
+  EXPECT_LT((c.at - Vec3(-0.5, 0, 0)).norm(), 1e-15);
 }
 
 TEST(Chart, CollapseTetEdgeRefusedAtRestEverywhereOnTheEdgeMayTangleForTheCallerToUntangle) {
@@ -630,41 +683,16 @@ TEST(Chart, CollapseTetEdgeRefusedAtRestEverywhereOnTheEdgeMayTangleForTheCaller
   // edge (ends, midpoint, quarter points) keeps every tet positive at rest. With rest_may_tangle
   // the collapse is made with the merged vertex at the midpoint, for the caller to untangle the
   // rest mesh's interior there (here every vertex is on the boundary, so the test stops at that).
-  MatX3d V(11, 3);
-  enum { a, b, p1, p2, y, yr, yb, ybr, l, r, o };
-  V << 0, 0, 0, 1, 0, 0, 0.2, 0.25, 0, 0.72, -0.22, 0, 0.2, 0.5, 0, 0.8, 0.5, 0, 0.2, -0.5, 0, 0.8, -0.5, 0, -0.5, 0,
-      0, 1.5, 0, 0, 0.5, 0, -1;
-  const std::vector<std::array<int, 3>> top{{a, b, p1},  {a, p1, y},  {a, y, l},    {a, l, yb},
-                                            {a, yb, p2}, {a, p2, b},  {b, yr, p1},  {b, r, yr},
-                                            {b, ybr, r}, {b, p2, ybr}, {p1, yr, y}, {p2, yb, ybr}};
-  const std::vector<std::array<int, 2>> rim{{y, l}, {l, yb}, {yb, ybr}, {ybr, r}, {r, yr}, {yr, y}};
-  MatX4i T(top.size(), 4);
-  MatX3i B(top.size() + rim.size(), 3);
-  for (size_t i = 0; i < top.size(); ++i) {
-    const auto& f = top[i];
-    T.row(i) << f[0], f[2], f[1], o;
-    B.row(i) << f[0], f[1], f[2];
-  }
-  for (size_t i = 0; i < rim.size(); ++i) B.row(top.size() + i) << rim[i][1], rim[i][0], o;
-  ASSERT_EQ(measure_tets(V, T).inverted, 0);
-  const std::vector<int> labels(B.rows(), 4);
+  using enum Fan::Vertex;
+  const Fan fan = make_fan(Vec3(0.2, 0.25, 0), Vec3(0.72, -0.22, 0));
+  ASSERT_EQ(measure_tets(fan.V, fan.T).inverted, 0);
   for (auto [keep, drop] : {std::pair{int(a), int(b)}, std::pair{int(b), int(a)}}) {
-    MatX4i T1 = T;
-    MatX3i B1 = B;
-    std::vector<int> L1 = labels;
-    std::string why;
-    Vec3 at, rest_at;
-    EXPECT_FALSE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why, nullptr, &at, &rest_at));
-    EXPECT_EQ(why, "a tet would turn over at rest");
-    EXPECT_EQ(T1, T);
-    ASSERT_TRUE(chart::collapse_tet_edge(V, V, T1, B1, L1, keep, drop, &why, nullptr, &at, &rest_at, true, true))
-        << why;
-    EXPECT_LT((rest_at - Vec3(0.5, 0, 0)).norm(), 1e-15);
-    EXPECT_EQ(T1.rows(), T.rows() - 2);
-    EXPECT_EQ(sorted_faces(tet_boundary(T1)), sorted_faces(B1));
-    MatX3d V1 = V;
-    V1.row(keep) = rest_at.transpose();
-    EXPECT_GT(measure_tets(V1, T1).inverted + measure_tets(V1, T1).zero_volume, 0);
+    const Collapsed c = refused_unless_tangle_allowed(fan, fan.V, keep, drop, "a tet would turn over at rest", true);
+    EXPECT_LT((c.rest_at - Vec3(0.5, 0, 0)).norm(), 1e-15);
+    EXPECT_EQ(sorted_faces(tet_boundary(c.T)), sorted_faces(c.B));
+    MatX3d V1 = fan.V;
+    V1.row(keep) = c.rest_at.transpose();
+    EXPECT_GT(measure_tets(V1, c.T).inverted + measure_tets(V1, c.T).zero_volume, 0);
   }
 }
 
@@ -690,15 +718,7 @@ TEST(Realize, LocalUntanglingWithAPerTetReferenceKeepsTheBoundary) {
     if (!fixed[0][i]) v = i;
   ASSERT_GE(v, 0) << "no interior vertex";
   MatX3d X = tm.V;
-  // Through the far side of its star: to the reflection of itself in its farthest neighbour.
-  Vec3 far = X.row(v).transpose();
-  for (int t = 0; t < tm.T.rows(); ++t)
-    for (int j = 0; j < 4; ++j)
-      if (tm.T(t, j) == v)
-        for (int k = 0; k < 4; ++k)
-          if ((X.row(tm.T(t, k)) - X.row(v)).norm() > (far - Vec3(X.row(v).transpose())).norm())
-            far = X.row(tm.T(t, k)).transpose();
-  X.row(v) = (1.5 * far - 0.5 * Vec3(X.row(v).transpose())).transpose();
+  push_through_star(tm.T, v, 0.5, X);
   ASSERT_GT(measure_tets(X, tm.T).inverted, 0);
   int left = -1;
   chart::untangle_tets_locally(reference, tm.T, fixed, X, left);
