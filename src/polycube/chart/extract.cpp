@@ -267,10 +267,6 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
       // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
       // is only where the realization starts, so the merged vertex goes to the midpoint and the
-      // tets around it are untangled locally; if that fails, the collapse is undone.
-      // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
-      // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
-      // is only where the realization starts, so the merged vertex goes to the midpoint and the
       // tets around it are untangled locally. Refused at rest (tet/hand: slivers at both ends):
       // the merged vertex goes to the edge's midpoint, on the input surface, and the rest mesh's
       // interior vertices around it are untangled (the input volume stays the same, only its
@@ -298,7 +294,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
           MatX3d R = cur_rest;
           R.row(keep) = rest_at.transpose();
           int left_rest = 0;
-          if (measure_tets(R, CT).inverted + measure_tets(R, CT).zero_volume > 0) {
+          const TetQuality at_rest = measure_tets(R, CT);
+          if (at_rest.inverted + at_rest.zero_volume > 0) {
             std::array<std::vector<char>, 3> boundary;
             for (auto& f : boundary) f.assign(cur_rest.rows(), 0);
             for (int f = 0; f < CB.rows(); ++f)
@@ -366,9 +363,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   auto sync_labels = [&] {
     for (size_t i = 0; i < cb_row.size(); ++i) e.labels[cb_row[i]] = CL[i];
   };
-  // The retries keep to the continuation start, the one that got every tet positive (when
-  // both starts were tried, the eq17 start mostly fails after a long untangling).
   int warm_kept = 0;  // failed retries from an earlier state kept as the next one's start
+  // The retries from the deformed mesh keep to the continuation start, the one that got every tet
+  // positive (when both starts were tried, the eq17 start mostly fails after a long untangling).
   auto realize_again = [&] {
     if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= rest.rows()) {
       // From the failed realization's state (every vertex of the input numbering; a merged one

@@ -1096,12 +1096,12 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         }
         ut = solver.untangle(X, inverted);
         if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
+        // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with
+        // them fixed. (Not for the previous start: its few inverted tets are flat, det ~ 0, where
+        // the elliptic energy's eps schedule has nothing to work with.)
+        if (inverted > 0) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
+        if (inverted > 0) ut += solver.untangle_local(X, inverted);
       }
-      // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them
-      // fixed. (Not after the previous start: its few inverted tets are flat, det ~ 0, where the
-      // elliptic energy's eps schedule has nothing to work with.)
-      if (inverted > 0 && name == "eq17") ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
-      if (inverted > 0 && name == "eq17") ut += solver.untangle_local(X, inverted);
       if (inverted > 0) {
         log.debug("realization from the " + name + " start: " + std::to_string(inverted) +
                   " tets still inverted after " + std::to_string(ut) + " untangling steps");

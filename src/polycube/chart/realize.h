@@ -42,8 +42,8 @@ struct RealizeOptions {
   /// "continuation", "eq17" (the paper's), or "auto": both; a result with every boundary triangle
   /// facing its label beats one without, then the lower final ARAP distortion wins. "previous":
   /// `deformed` is an earlier realization's state (on or near the planes, maybe with tets
-  /// inverted, e.g. before an edge collapse): landed on the planes, untangled as the eq17 start
-  /// is, then the ARAP minimization.
+  /// inverted, e.g. before an edge collapse): landed on the planes, untangled locally (the
+  /// vertices around the inverted tets), then the ARAP minimization.
   std::string start = "auto";
   int max_iterations = 200;       ///< ARAP Newton iterations at most
   double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively
