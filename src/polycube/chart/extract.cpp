@@ -277,25 +277,24 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         const MatX3i CB0 = CB;
         const std::vector<int> CL0 = CL;
         if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true, true)) {
-          // Reference shape per tet: its rest shape before the collapse (every one positive).
-          MatX3d soup(4 * CT.rows(), 3);
-          MatX4i ST(CT.rows(), 4);
-          Eigen::Index i = 0;
-          for (int t = 0; t < CT0.rows(); ++t) {
-            bool hk = false, hd = false;
-            for (int j = 0; j < 4; ++j) hk |= CT0(t, j) == keep, hd |= CT0(t, j) == drop;
-            if (hk && hd) continue;  // gone with the edge
-            for (int j = 0; j < 4; ++j) soup.row(4 * i + j) = cur_rest.row(CT0(t, j)), ST(i, j) = static_cast<int>(4 * i + j);
-            ++i;
-          }
-          const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
-          std::array<std::vector<char>, 3> fixed;
-          for (auto& f : fixed) f.assign(cur_rest.rows(), 0);
           MatX3d R = cur_rest;
           R.row(keep) = rest_at.transpose();
           int left_rest = 0;
           const TetQuality at_rest = measure_tets(R, CT);
           if (at_rest.inverted + at_rest.zero_volume > 0) {
+            // Reference shape per tet: its rest shape before the collapse (every one positive).
+            MatX3d soup(4 * CT.rows(), 3);
+            MatX4i ST(CT.rows(), 4);
+            Eigen::Index i = 0;
+            for (int t = 0; t < CT0.rows(); ++t) {
+              bool hk = false, hd = false;
+              for (int j = 0; j < 4; ++j) hk |= CT0(t, j) == keep, hd |= CT0(t, j) == drop;
+              if (hk && hd) continue;  // gone with the edge
+              for (int j = 0; j < 4; ++j)
+                soup.row(4 * i + j) = cur_rest.row(CT0(t, j)), ST(i, j) = static_cast<int>(4 * i + j);
+              ++i;
+            }
+            const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
             std::array<std::vector<char>, 3> boundary;
             for (auto& f : boundary) f.assign(cur_rest.rows(), 0);
             for (int f = 0; f < CB.rows(); ++f)
@@ -306,6 +305,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
           }
           int left = 0;
           if (left_rest == 0) {
+            std::array<std::vector<char>, 3> fixed;  // none: every vertex may move in the deformed start
+            for (auto& f : fixed) f.assign(cur_rest.rows(), 0);
             untangled = cur_def;
             untangled.row(keep) = at.transpose();
             untangled.row(drop) = at.transpose();
@@ -742,6 +743,18 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
     }
     return true;
   };
+  // The first of `at` that keeps the star positive in P (written to *out), else, with may_tangle,
+  // the edge's midpoint in P (the caller untangles there).
+  auto place = [&](const MatX3d& P, const std::vector<Vec3>& at, Vec3* out, bool may_tangle) {
+    for (const Vec3& p : at)
+      if (positive_with(P, p)) {
+        if (out) *out = p;
+        return true;
+      }
+    if (!may_tangle || !out) return false;
+    *out = 0.5 * (P.row(keep) + P.row(drop)).transpose();
+    return true;
+  };
   {
     std::vector<Vec3> at{rest.row(keep).transpose()};
     if (rest_at) {
@@ -751,18 +764,7 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
       at.push_back(0.75 * k + 0.25 * d);
       at.push_back(0.25 * k + 0.75 * d);
     }
-    bool found = false;
-    for (const Vec3& p : at)
-      if (positive_with(rest, p)) {
-        if (rest_at) *rest_at = p;
-        found = true;
-        break;
-      }
-    if (!found && rest_may_tangle && rest_at) {
-      *rest_at = 0.5 * (rest.row(keep) + rest.row(drop)).transpose();
-      found = true;
-    }
-    if (!found) return refuse("a tet would turn over at rest");
+    if (!place(rest, at, rest_at, rest_may_tangle)) return refuse("a tet would turn over at rest");
   }
   // In the deformed mesh (only the start of the realization) the merged vertex may sit at either
   // end, the midpoint, the quarter points, or off the edge towards the centroid of the star's other
@@ -786,19 +788,8 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
         for (double w : {0.25, 0.5, 0.75, 1.0}) at.push_back((1 - w) * mid + w * centroid);
       }
     }
-    bool found = false;
-    for (const Vec3& p : at) {
-      if (positive_with(deformed, p)) {
-        if (deformed_at) *deformed_at = p;
-        found = true;
-        break;
-      }
-    }
-    if (!found && deformed_may_tangle && deformed_at) {
-      *deformed_at = 0.5 * (deformed.row(keep) + deformed.row(drop)).transpose();
-      found = true;
-    }
-    if (!found) return refuse("a tet would turn over in the deformed mesh");
+    if (!place(deformed, at, deformed_at, deformed_may_tangle))
+      return refuse("a tet would turn over in the deformed mesh");
   }
   // Link of `keep`: the triangle opposite it in each star tet.
   std::map<std::pair<int, int>, int> edge_count;
