@@ -2,6 +2,8 @@
 #include <map>
 
 #include "polycube/chart/labeling.h"
+#include "polycube/core/topology.h"
+#include "polycube/examples/examples.h"
 #include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/features.h"
 #include "polycube/geometry/surface_fit.h"
@@ -315,4 +317,31 @@ TEST(SurfaceFit, NoMoveTakesAQuadBelowTheFloor) {
                                                                [&](int v) { return r.worst(v); });
   EXPECT_NEAR(d.floor, 1, 1e-12);
   EXPECT_EQ(d.moves, 0);
+}
+
+TEST(Quad, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {
+  // As for hexes: a tet mesh's V with its boundary as the target gives the quads of its surface
+  // alone (the interior vertices were samples of the fitting and of the crease checks).
+  const MeshData l = examples::make("l_bracket", 0.1);
+  const TetMesh tm = tet_mesh_of(l.V, l.F, 3000);
+  ASSERT_TRUE(has_unreferenced_vertices(tm.V.rows(), tm.boundary));
+  MatX3d rest = tm.V;
+  for (int v = 0; v < rest.rows(); ++v) {
+    rest(v, 0) += 0.1 * std::sin(M_PI * tm.V(v, 1));
+    rest(v, 2) += 0.1 * std::sin(M_PI * tm.V(v, 0));
+  }
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  hex::HexOptions o;
+  o.target_hexes = 800;
+  o.pillow = "off";
+  o.smooth_iterations = 0;
+  o.fit.rounds = 0;
+  const SurfaceMesh surface = compact_surface(rest, tm.boundary);
+  const hex::HexResult h = hex::hex_mesh_from_polycube(rest, tm.T, tm.V, tm.boundary, labels, &surface, o);
+  const quad::QuadResult a = quad::quad_mesh_from_hexes(h.V, h.H, SurfaceMesh{rest, tm.boundary});
+  const quad::QuadResult b = quad::quad_mesh_from_hexes(h.V, h.H, surface);
+  EXPECT_GT(b.fit.moves, 0) << "the fitting should have work to do on the bent L";
+  ASSERT_EQ(a.V.rows(), b.V.rows());
+  EXPECT_EQ((a.V - b.V).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_EQ(a.quality.inverted, 0);
 }

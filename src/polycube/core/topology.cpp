@@ -36,6 +36,13 @@ std::vector<std::pair<int, int>> unique_edges(
   return e;
 }
 
+bool has_unreferenced_vertices(Eigen::Index nv, const MatX3i& F) {
+  std::vector<char> used(static_cast<size_t>(nv), 0);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) used[F(f, k)] = 1;
+  return std::find(used.begin(), used.end(), 0) != used.end();
+}
+
 SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* kept) {
   std::vector<int> id(V.rows(), -1), back;
   SurfaceMesh s;

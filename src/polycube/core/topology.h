@@ -36,6 +36,9 @@ std::vector<std::pair<int, int>> unique_edges(const Eigen::Ref<const Eigen::Matr
 /// (if given) receives the original index of every kept vertex.
 SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* kept = nullptr);
 
+/// Whether some vertex 0..nv-1 is used by no triangle of F.
+bool has_unreferenced_vertices(Eigen::Index nv, const MatX3i& F);
+
 /// Sorted neighbour lists of every vertex (0..nv) along the given undirected edges.
 std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pair<int, int>>& edges);
 

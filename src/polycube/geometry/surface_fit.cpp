@@ -33,10 +33,14 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
   const int n = static_cast<int>(V.rows());
   const int nq = static_cast<int>(Q.rows());
   if (nq == 0) return st;
-  // Samples of the target: its vertices and triangle centroids.
+  // Samples of the target: its vertices (those of its triangles) and triangle centroids.
   std::vector<Vec3> samples;
   samples.reserve(target.V.rows() + target.F.rows());
-  for (int i = 0; i < target.V.rows(); ++i) samples.push_back(target.V.row(i).transpose());
+  std::vector<char> used(target.V.rows(), 0);
+  for (int f = 0; f < target.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) used[target.F(f, k)] = 1;
+  for (int i = 0; i < target.V.rows(); ++i)
+    if (used[i]) samples.push_back(target.V.row(i).transpose());
   for (int f = 0; f < target.F.rows(); ++f)
     samples.push_back((target.V.row(target.F(f, 0)) + target.V.row(target.F(f, 1)) + target.V.row(target.F(f, 2)))
                           .transpose() / 3.0);
