@@ -781,3 +781,61 @@ TEST(Realize, GivenPolycubeMapIsLabelledFlattenedAndChecked) {
   // Another vertex count.
   EXPECT_THROW(chart::polycube_from_map(tm.V, tm.T, tm.boundary, X.topRows(X.rows() - 1)), Error);
 }
+
+TEST(Chart, SplittingEdgesLetsACollapseMeetTheLinkCondition) {
+  // In a Delaunay tet mesh of the L block a few boundary edges cannot collapse because a tet at
+  // each end stands on one triangle (they would coincide: the link condition fails; tet/hand and
+  // humanoid stall at such edges). Splitting the interior edges from the dropped end to the shared
+  // vertices keeps the volume, its boundary and every tet positive, and lets the collapse through
+  // the link checks (at rest the merged vertex may still need the caller's untangling).
+  const MeshData l = examples::make("l_bracket", 0.04);
+  const TetMesh tm = tet_mesh_of(l.V, l.F);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  int found = 0, passed = 0;
+  double volume = 0;
+  for (int t = 0; t < tm.T.rows(); ++t)
+    volume += tet_volume(tm.V.row(tm.T(t, 0)).transpose(), tm.V.row(tm.T(t, 1)).transpose(),
+                         tm.V.row(tm.T(t, 2)).transpose(), tm.V.row(tm.T(t, 3)).transpose());
+  auto vol = [](const MatX3d& V, const MatX4i& T, int t) {
+    return tet_volume(V.row(T(t, 0)).transpose(), V.row(T(t, 1)).transpose(), V.row(T(t, 2)).transpose(),
+                      V.row(T(t, 3)).transpose());
+  };
+  for (auto [a, b] : unique_edges(tm.boundary)) {
+    MatX4i T = tm.T;
+    MatX3i B = tm.boundary;
+    std::vector<int> L = labels;
+    std::string why;
+    Vec3 at, rest_at;
+    if (chart::collapse_tet_edge(tm.V, tm.V, T, B, L, a, b, &why, nullptr, &at, &rest_at) ||
+        why != "two tets would coincide")
+      continue;
+    ++found;
+    MatX3d R = tm.V, D = tm.V;
+    const auto parents = chart::split_edges_for_collapse(R, D, T, B, a, b);
+    ASSERT_FALSE(parents.empty()) << a << "-" << b;
+    ASSERT_EQ(R.rows(), tm.V.rows() + static_cast<Eigen::Index>(parents.size()));
+    for (size_t i = 0; i < parents.size(); ++i) {
+      EXPECT_EQ(parents[i].first, b);
+      EXPECT_EQ((R.row(tm.V.rows() + i) - 0.5 * (R.row(parents[i].first) + R.row(parents[i].second))).norm(), 0.0);
+    }
+    EXPECT_EQ(measure_tets(R, T).inverted + measure_tets(R, T).zero_volume, 0);
+    double v2 = 0;
+    for (int t = 0; t < T.rows(); ++t) v2 += vol(R, T, t);
+    EXPECT_NEAR(v2, volume, 1e-12 * volume);
+    EXPECT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
+    if (!chart::collapse_tet_edge(R, D, T, B, L, a, b, &why, nullptr, &at, &rest_at, true, true)) {
+      ADD_FAILURE() << "edge " << a << "-" << b << " still refused after " << parents.size() << " splits: " << why;
+      continue;
+    }
+    ++passed;
+    EXPECT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
+    std::set<std::array<int, 4>> distinct;
+    for (int t = 0; t < T.rows(); ++t) {
+      std::array<int, 4> q{T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+      std::sort(q.begin(), q.end());
+      EXPECT_TRUE(distinct.insert(q).second) << "two tets coincide";
+    }
+  }
+  EXPECT_GT(found, 0) << "no boundary edge of the L refused for the link condition: the test needs one";
+  EXPECT_EQ(passed, found);
+}

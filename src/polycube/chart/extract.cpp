@@ -18,6 +18,26 @@ namespace polycube::chart {
 namespace {
 
 // Tets of a realization's state (r.T over r.rest and r.X) that are not positive.
+// Vertices appended to the work mesh at `at` (split_edges_for_collapse: midpoints of `parents`)
+// inserted into a realization of it: after its first `at` vertices, before its own split ones.
+void insert_split_vertices(RealizeResult& r, Eigen::Index at, const std::vector<std::pair<int, int>>& parents) {
+  const Eigen::Index k = static_cast<Eigen::Index>(parents.size());
+  auto grow = [&](MatX3d& P) {
+    if (P.rows() < at) return;
+    MatX3d Q(P.rows() + k, 3);
+    Q.topRows(at) = P.topRows(at);
+    for (Eigen::Index i = 0; i < k; ++i)
+      Q.row(at + i) = 0.5 * (P.row(parents[i].first) + P.row(parents[i].second));
+    Q.bottomRows(P.rows() - at) = P.bottomRows(P.rows() - at);
+    P = std::move(Q);
+  };
+  grow(r.X);
+  grow(r.rest);
+  for (int t = 0; t < r.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j)
+      if (r.T(t, j) >= at) r.T(t, j) += static_cast<int>(k);
+}
+
 std::vector<int> inverted_tets(const RealizeResult& r) {
   auto volume = [&](const MatX3d& P, int t) {
     return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
@@ -134,7 +154,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   MatX3d cur_rest = T.rows() > 0 ? rest : MatX3d();
   auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
                              const std::vector<int>& merged, const RealizeOptions& ro) {
-    const int n = static_cast<int>(rest.rows());
+    // The work mesh's vertices: the input's, then those of edges split for collapses.
+    const int n = static_cast<int>(cur_rest.rows());
     std::vector<int> o2n(n, -1), n2o;
     for (int v = 0; v < n; ++v)
       if (merged[v] < 0) {
@@ -165,7 +186,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       for (int i = 0; i < P.rows(); ++i) full.row(back(i)) = P.row(i);
       for (int v = 0; v < n; ++v)
         if (merged[v] >= 0) {
-          if (dropped_at.rows() > 0) full.row(v) = dropped_at.row(v);
+          if (v < dropped_at.rows()) full.row(v) = dropped_at.row(v);
           else full.row(v) = full.row(root(v)).eval();
         }
       P = std::move(full);
@@ -184,7 +205,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   std::vector<int> cb_row(B.rows());
   std::iota(cb_row.begin(), cb_row.end(), 0);
   std::vector<int> merged(rest.rows(), -1);
-  int collapses = 0, collapse_rounds = 0;
+  int collapses = 0, collapse_rounds = 0, split_edges = 0;
   auto realize_current = [&](const RealizeOptions& ro) {
     return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
@@ -208,7 +229,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     if (T.rows() == 0 || r.success || (r.inverted == 0 && !fold_case) || r.inverted > opt.max_relabel_inverted ||
         r.X.rows() == 0 || r.T.rows() == 0 || collapse_rounds >= opt.tet_collapse_rounds)
       return 0;
-    const int n = static_cast<int>(rest.rows());
+    const int n = static_cast<int>(cur_rest.rows());
     const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
     const auto bedges = unique_edges(CB);
     std::vector<std::pair<int, int>> cand;
@@ -255,7 +276,11 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       std::string why;
       std::vector<int> rows;  // the rows of CB the collapse removes
       Vec3 at, rest_at;
+      MatX3d untangled, rest_untangled;
+      bool coincide = false;  // refused in some order because two tets would coincide
+      auto attempt = [&]() -> bool {
       bool ok = collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at);
+      coincide |= why == "two tets would coincide";
       if (!ok) {
         // The vertex on fewer charts kept instead.
         std::string why2;
@@ -263,6 +288,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
           std::swap(keep, drop);
           ok = true;
         }
+        coincide |= why2 == "two tets would coincide";
       }
       // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
       // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
@@ -271,7 +297,6 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       // the merged vertex goes to the edge's midpoint, on the input surface, and the rest mesh's
       // interior vertices around it are untangled (the input volume stays the same, only its
       // tetrahedralization moves). If either untangling fails, the collapse is undone.
-      MatX3d untangled, rest_untangled;
       if (!ok && (why == "a tet would turn over in the deformed mesh" || why == "a tet would turn over at rest")) {
         const MatX4i CT0 = CT;
         const MatX3i CB0 = CB;
@@ -330,6 +355,44 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
           }
         }
       }
+      coincide |= why == "two tets would coincide";  // the tangled collapse's reason included
+      return ok;
+      };
+      bool ok = attempt();
+      // Refused because the two ends share a vertex outside the edge's ring (tet/hand, humanoid: a
+      // tet at each end on one triangle, which the collapse would make coincide): the interior
+      // edges from `drop` to those vertices are split first (split_edges_for_collapse), then the
+      // collapse is tried again; undone if it still fails.
+      if (!ok && coincide) {
+        const int keep0 = keep_u ? u : v, drop0 = keep_u ? v : u;
+        const MatX4i CT0 = CT;
+        const MatX3d rest0 = cur_rest, def0 = cur_def;
+        const auto parents = split_edges_for_collapse(cur_rest, cur_def, CT, CB, keep0, drop0);
+        if (!parents.empty()) {
+          const Eigen::Index n0 = rest0.rows();
+          merged.resize(cur_rest.rows(), -1);
+          keep = keep0, drop = drop0;
+          ok = attempt();
+          if (ok) {
+            // The failed realization gets the new vertices too (midpoints of their edges), after
+            // the work mesh's vertices and before its own split vertices, so that the next one can
+            // start from it.
+            insert_split_vertices(e.realized, n0, parents);
+            split_edges += static_cast<int>(parents.size());
+            hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) + ": " +
+                        std::to_string(parents.size()) + " interior edges from " + std::to_string(drop0) +
+                        " split first (the link condition)");
+          } else {
+            CT = CT0;
+            cur_rest = rest0;
+            cur_def = def0;
+            merged.resize(n0);
+            why = "after splitting " + std::to_string(parents.size()) + " interior edges for the link condition, " + why;
+          }
+        } else {
+          why += " (no interior edge to split: the shared vertices are joined to it by boundary edges)";
+        }
+      }
       if (!ok) {
         hooks.debug("boundary edge " + std::to_string(u) + "-" + std::to_string(v) +
                     " has both ends at one point of the polycube but cannot be collapsed: " + why);
@@ -368,13 +431,13 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // The retries from the deformed mesh keep to the continuation start, the one that got every tet
   // positive (when both starts were tried, the eq17 start mostly fails after a long untangling).
   auto realize_again = [&] {
-    if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= rest.rows()) {
+    if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= cur_rest.rows()) {
       // From the failed realization's state (every vertex of the input numbering; a merged one
       // sits where its partner is).
       RealizeOptions ro = opt.realize;
       ro.start = "previous";
       MatX3d from_deformed = std::move(cur_def);
-      cur_def = e.realized.X.topRows(rest.rows());
+      cur_def = e.realized.X.topRows(cur_rest.rows());
       RealizeResult warm = realize_current(ro);
       cur_def = std::move(from_deformed);
       // Kept when it succeeds or leaves fewer tets inverted (or as many, and fewer triangles facing
@@ -514,6 +577,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   if (collapses > 0) {
     sync_labels();
     e.edge_collapses = collapses;
+    e.collapse_edge_splits = split_edges;
     if (e.realized.success) {
       e.map_B = CB;
       e.map_labels = CL;
@@ -884,6 +948,80 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
 }  // namespace polycube::chart
 
 namespace polycube::chart {
+
+std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& deformed, MatX4i& T,
+                                                          const MatX3i& B, int keep, int drop) {
+  std::set<int> nk, nd, ring;
+  std::set<std::array<int, 3>> opposite_drop;  // triangles opposite `drop` in its tets without `keep`
+  for (int t = 0; t < T.rows(); ++t) {
+    bool hk = false, hd = false;
+    for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
+    std::array<int, 3> o{};
+    int m = 0;
+    for (int j = 0; j < 4; ++j) {
+      const int v = T(t, j);
+      if (v == keep || v == drop) continue;
+      if (hk) nk.insert(v);
+      if (hd) nd.insert(v);
+      if (hk && hd) ring.insert(v);
+      if (m < 3) o[m++] = v;
+    }
+    if (hd && !hk) {
+      std::sort(o.begin(), o.end());
+      opposite_drop.insert(o);
+    }
+  }
+  // Vertices of both stars outside the edge's ring, and the vertices of triangles with a tet at
+  // each end (their tets would coincide even where the three are on the ring).
+  std::set<int> split_to;
+  for (int w : nd)
+    if (nk.count(w) && !ring.count(w)) split_to.insert(w);
+  for (int t = 0; t < T.rows(); ++t) {
+    bool hk = false, hd = false;
+    for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
+    if (!hk || hd) continue;
+    std::array<int, 3> o{};
+    int m = 0;
+    for (int j = 0; j < 4; ++j)
+      if (T(t, j) != keep) o[m++] = T(t, j);
+    std::sort(o.begin(), o.end());
+    if (opposite_drop.count(o)) split_to.insert(o.begin(), o.end());
+  }
+  // Boundary edges of `drop` stay (splitting them would change the surface).
+  for (int f = 0; f < B.rows(); ++f) {
+    bool hd = false;
+    for (int j = 0; j < 3; ++j) hd |= B(f, j) == drop;
+    if (hd)
+      for (int j = 0; j < 3; ++j) split_to.erase(B(f, j));
+  }
+  const std::vector<int> bad(split_to.begin(), split_to.end());
+  std::vector<std::pair<int, int>> parents;
+  for (int w : bad) {
+    const int m = static_cast<int>(rest.rows());
+    rest.conservativeResize(m + 1, Eigen::NoChange);
+    deformed.conservativeResize(m + 1, Eigen::NoChange);
+    rest.row(m) = 0.5 * (rest.row(drop) + rest.row(w));
+    deformed.row(m) = 0.5 * (deformed.row(drop) + deformed.row(w));
+    std::vector<int> edge_tets;
+    for (int t = 0; t < T.rows(); ++t) {
+      bool hw = false, hd = false;
+      for (int j = 0; j < 4; ++j) hw |= T(t, j) == w, hd |= T(t, j) == drop;
+      if (hw && hd) edge_tets.push_back(t);
+    }
+    Eigen::Index next = T.rows();
+    T.conservativeResize(next + static_cast<Eigen::Index>(edge_tets.size()), Eigen::NoChange);
+    for (int t : edge_tets) {
+      T.row(next) = T.row(t);
+      for (int j = 0; j < 4; ++j) {
+        if (T(t, j) == w) T(t, j) = m;          // the half at drop
+        if (T(next, j) == drop) T(next, j) = m;  // the half at w
+      }
+      ++next;
+    }
+    parents.emplace_back(drop, w);
+  }
+  return parents;
+}
 
 PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& X_in,
                                      double tolerance) {

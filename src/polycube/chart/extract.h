@@ -67,6 +67,9 @@ struct PolycubeExtraction {
   /// the realization pinned their ends to one point (collapse_tet_edge); map_B / map_labels then hold
   /// the boundary without their triangles, and the merged vertex sits on its partner in realized.X.
   int edge_collapses = 0;
+  /// Tet mode: interior edges split so that a collapse met the link condition
+  /// (split_edges_for_collapse); their vertices come after the input's in realized.rest / X.
+  int collapse_edge_splits = 0;
   /// The map's triangles and their labels: map_B / map_labels when repaired, else B / labels.
   const MatX3i& map_triangles(const MatX3i& B) const { return map_B.rows() > 0 ? map_B : B; }
   const std::vector<int>& map_triangle_labels() const { return map_B.rows() > 0 ? map_labels : labels; }
@@ -115,6 +118,18 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
                        int keep, int drop, std::string* why = nullptr, std::vector<int>* removed = nullptr,
                        Vec3* deformed_at = nullptr, Vec3* rest_at = nullptr, bool deformed_may_tangle = false,
                        bool rest_may_tangle = false);
+
+/// Tet mode: prepares the boundary edge (keep, drop) for collapse_tet_edge where the link
+/// condition fails: the edges from `drop` to every vertex joined to both ends but not in a tet with
+/// both, and to the vertices of every triangle with a tet at each end (the collapse would make those
+/// two tets coincide), are split at their midpoints, so that the stars of the two ends meet only
+/// along the edge's own ring afterwards. Each new vertex is appended to rest and deformed (at the
+/// edge's midpoint in each: every tet of the edge is halved, its orientation kept) and every tet of
+/// the edge replaced by its two halves (the first in place, the second appended to T). Edges of B
+/// are not split (the surface stays). Returns the parents (drop, w) of the new vertices in the
+/// order they were appended (empty: nothing changed); collapse_tet_edge still decides.
+std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& deformed, MatX4i& T,
+                                                          const MatX3i& B, int keep, int drop);
 
 /// A polycube map given from outside (an earlier run's tetmesh.mesh / polycube.mesh pair, or another
 /// tool's): X the polycube positions of the tet mesh (rest, T; B its outward boundary). Each boundary

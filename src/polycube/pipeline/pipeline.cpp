@@ -565,6 +565,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["misoriented_faces"] = rr.misoriented_faces;
       if (opt.surface) pj["edge_flips"] = ex.edge_flips;
       pj["edge_collapses"] = ex.edge_collapses;
+      pj["collapse_edge_splits"] = ex.collapse_edge_splits;
       pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
       if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
