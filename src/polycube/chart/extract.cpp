@@ -279,84 +279,84 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       MatX3d untangled, rest_untangled;
       bool coincide = false;  // refused in some order because two tets would coincide
       auto attempt = [&]() -> bool {
-      bool ok = collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at);
-      coincide |= why == "two tets would coincide";
-      if (!ok) {
-        // The vertex on fewer charts kept instead.
-        std::string why2;
-        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, drop, keep, &why2, &rows, &at, &rest_at)) {
-          std::swap(keep, drop);
-          ok = true;
-        }
-        coincide |= why2 == "two tets would coincide";
-      }
-      // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
-      // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
-      // is only where the realization starts, so the merged vertex goes to the midpoint and the
-      // tets around it are untangled locally. Refused at rest (tet/hand: slivers at both ends):
-      // the merged vertex goes to the edge's midpoint, on the input surface, and the rest mesh's
-      // interior vertices around it are untangled (the input volume stays the same, only its
-      // tetrahedralization moves). If either untangling fails, the collapse is undone.
-      if (!ok && (why == "a tet would turn over in the deformed mesh" || why == "a tet would turn over at rest")) {
-        const MatX4i CT0 = CT;
-        const MatX3i CB0 = CB;
-        const std::vector<int> CL0 = CL;
-        if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true, true)) {
-          MatX3d R = cur_rest;
-          R.row(keep) = rest_at.transpose();
-          int left_rest = 0;
-          const TetQuality at_rest = measure_tets(R, CT);
-          if (at_rest.inverted + at_rest.zero_volume > 0) {
-            // Reference shape per tet: its rest shape before the collapse (every one positive).
-            MatX3d soup(4 * CT.rows(), 3);
-            MatX4i ST(CT.rows(), 4);
-            Eigen::Index i = 0;
-            for (int t = 0; t < CT0.rows(); ++t) {
-              bool hk = false, hd = false;
-              for (int j = 0; j < 4; ++j) hk |= CT0(t, j) == keep, hd |= CT0(t, j) == drop;
-              if (hk && hd) continue;  // gone with the edge
-              for (int j = 0; j < 4; ++j)
-                soup.row(4 * i + j) = cur_rest.row(CT0(t, j)), ST(i, j) = static_cast<int>(4 * i + j);
-              ++i;
-            }
-            const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
-            std::array<std::vector<char>, 3> boundary;
-            for (auto& f : boundary) f.assign(cur_rest.rows(), 0);
-            for (int f = 0; f < CB.rows(); ++f)
-              for (int j = 0; j < 3; ++j)
-                for (auto& b : boundary) b[CB(f, j)] = 1;
-            untangle_tets_locally(reference, CT, boundary, R, left_rest);
-            if (left_rest == 0) rest_untangled = R;
-          }
-          int left = 0;
-          if (left_rest == 0) {
-            std::array<std::vector<char>, 3> fixed;  // none: every vertex may move in the deformed start
-            for (auto& f : fixed) f.assign(cur_rest.rows(), 0);
-            untangled = cur_def;
-            untangled.row(keep) = at.transpose();
-            untangled.row(drop) = at.transpose();
-            untangle_tets_locally(R, CT, fixed, untangled, left);
-          }
-          if (left_rest == 0 && left == 0) {
+        bool ok = collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at);
+        coincide |= why == "two tets would coincide";
+        if (!ok) {
+          // The vertex on fewer charts kept instead.
+          std::string why2;
+          if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, drop, keep, &why2, &rows, &at, &rest_at)) {
+            std::swap(keep, drop);
             ok = true;
-            hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) + ": " +
-                        (rest_untangled.rows() > 0 ? "the rest mesh's interior untangled around the merged vertex"
-                                                   : "the deformed mesh untangled around the merged vertex"));
-          } else {
-            CT = CT0;
-            CB = CB0;
-            CL = CL0;
-            untangled.resize(0, 3);
-            rest_untangled.resize(0, 3);
-            why = left_rest > 0 ? "a tet would turn over at rest, and " + std::to_string(left_rest) +
-                                      " stay inverted after untangling the rest mesh's interior"
-                                : "a tet would turn over in the deformed mesh, and " + std::to_string(left) +
-                                      " stay inverted after local untangling";
+          }
+          coincide |= why2 == "two tets would coincide";
+        }
+        // Valid at rest but no place for the merged vertex keeps its star positive in the deformed
+        // mesh (humanoid: a chart-border vertex and a corner 0.025 apart there): the deformed mesh
+        // is only where the realization starts, so the merged vertex goes to the midpoint and the
+        // tets around it are untangled locally. Refused at rest (tet/hand: slivers at both ends):
+        // the merged vertex goes to the edge's midpoint, on the input surface, and the rest mesh's
+        // interior vertices around it are untangled (the input volume stays the same, only its
+        // tetrahedralization moves). If either untangling fails, the collapse is undone.
+        if (!ok && (why == "a tet would turn over in the deformed mesh" || why == "a tet would turn over at rest")) {
+          const MatX4i CT0 = CT;
+          const MatX3i CB0 = CB;
+          const std::vector<int> CL0 = CL;
+          if (collapse_tet_edge(cur_rest, cur_def, CT, CB, CL, keep, drop, &why, &rows, &at, &rest_at, true, true)) {
+            MatX3d R = cur_rest;
+            R.row(keep) = rest_at.transpose();
+            int left_rest = 0;
+            const TetQuality at_rest = measure_tets(R, CT);
+            if (at_rest.inverted + at_rest.zero_volume > 0) {
+              // Reference shape per tet: its rest shape before the collapse (every one positive).
+              MatX3d soup(4 * CT.rows(), 3);
+              MatX4i ST(CT.rows(), 4);
+              Eigen::Index i = 0;
+              for (int t = 0; t < CT0.rows(); ++t) {
+                bool hk = false, hd = false;
+                for (int j = 0; j < 4; ++j) hk |= CT0(t, j) == keep, hd |= CT0(t, j) == drop;
+                if (hk && hd) continue;  // gone with the edge
+                for (int j = 0; j < 4; ++j)
+                  soup.row(4 * i + j) = cur_rest.row(CT0(t, j)), ST(i, j) = static_cast<int>(4 * i + j);
+                ++i;
+              }
+              const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
+              std::array<std::vector<char>, 3> boundary;
+              for (auto& f : boundary) f.assign(cur_rest.rows(), 0);
+              for (int f = 0; f < CB.rows(); ++f)
+                for (int j = 0; j < 3; ++j)
+                  for (auto& b : boundary) b[CB(f, j)] = 1;
+              untangle_tets_locally(reference, CT, boundary, R, left_rest);
+              if (left_rest == 0) rest_untangled = R;
+            }
+            int left = 0;
+            if (left_rest == 0) {
+              std::array<std::vector<char>, 3> fixed;  // none: every vertex may move in the deformed start
+              for (auto& f : fixed) f.assign(cur_rest.rows(), 0);
+              untangled = cur_def;
+              untangled.row(keep) = at.transpose();
+              untangled.row(drop) = at.transpose();
+              untangle_tets_locally(R, CT, fixed, untangled, left);
+            }
+            if (left_rest == 0 && left == 0) {
+              ok = true;
+              hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) + ": " +
+                          (rest_untangled.rows() > 0 ? "the rest mesh's interior untangled around the merged vertex"
+                                                     : "the deformed mesh untangled around the merged vertex"));
+            } else {
+              CT = CT0;
+              CB = CB0;
+              CL = CL0;
+              untangled.resize(0, 3);
+              rest_untangled.resize(0, 3);
+              why = left_rest > 0 ? "a tet would turn over at rest, and " + std::to_string(left_rest) +
+                                        " stay inverted after untangling the rest mesh's interior"
+                                  : "a tet would turn over in the deformed mesh, and " + std::to_string(left) +
+                                        " stay inverted after local untangling";
+            }
           }
         }
-      }
-      coincide |= why == "two tets would coincide";  // the tangled collapse's reason included
-      return ok;
+        coincide |= why == "two tets would coincide";  // the tangled collapse's reason included
+        return ok;
       };
       bool ok = attempt();
       // Refused because the two ends share a vertex outside the edge's ring (tet/hand, humanoid: a
@@ -387,7 +387,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
             cur_rest = rest0;
             cur_def = def0;
             merged.resize(n0);
-            why = "after splitting " + std::to_string(parents.size()) + " interior edges for the link condition, " + why;
+            why = "after splitting " + std::to_string(parents.size()) + " interior edges for the link condition, " +
+                  why;
           }
         } else {
           why += " (no interior edge to split: the shared vertices are joined to it by boundary edges)";
