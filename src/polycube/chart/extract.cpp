@@ -26,8 +26,8 @@ void insert_split_vertices(RealizeResult& r, Eigen::Index at, const std::vector<
     if (P.rows() < at) return;
     MatX3d Q(P.rows() + k, 3);
     Q.topRows(at) = P.topRows(at);
-    for (Eigen::Index i = 0; i < k; ++i)
-      Q.row(at + i) = 0.5 * (P.row(parents[i].first) + P.row(parents[i].second));
+    for (Eigen::Index i = 0; i < k; ++i)  // a parent may be an earlier new vertex (below at + i)
+      Q.row(at + i) = 0.5 * (Q.row(parents[i].first) + Q.row(parents[i].second));
     Q.bottomRows(P.rows() - at) = P.bottomRows(P.rows() - at);
     P = std::move(Q);
   };
@@ -380,8 +380,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
             insert_split_vertices(e.realized, n0, parents);
             split_edges += static_cast<int>(parents.size());
             hooks.debug("boundary edge " + std::to_string(drop) + " -> " + std::to_string(keep) + ": " +
-                        std::to_string(parents.size()) + " interior edges from " + std::to_string(drop0) +
-                        " split first (the link condition)");
+                        std::to_string(parents.size()) + " interior edges split first (the link condition)");
           } else {
             CT = CT0;
             cur_rest = rest0;
@@ -952,74 +951,90 @@ namespace polycube::chart {
 
 std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& deformed, MatX4i& T,
                                                           const MatX3i& B, int keep, int drop) {
-  std::set<int> nk, nd, ring;
-  std::set<std::array<int, 3>> opposite_drop;  // triangles opposite `drop` in its tets without `keep`
-  for (int t = 0; t < T.rows(); ++t) {
-    bool hk = false, hd = false;
-    for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
-    std::array<int, 3> o{};
-    int m = 0;
-    for (int j = 0; j < 4; ++j) {
-      const int v = T(t, j);
-      if (v == keep || v == drop) continue;
-      if (hk) nk.insert(v);
-      if (hd) nd.insert(v);
-      if (hk && hd) ring.insert(v);
-      if (m < 3) o[m++] = v;
-    }
-    if (hd && !hk) {
-      std::sort(o.begin(), o.end());
-      opposite_drop.insert(o);
-    }
-  }
-  // Vertices of both stars outside the edge's ring, and the vertices of triangles with a tet at
-  // each end (their tets would coincide even where the three are on the ring).
-  std::set<int> split_to;
-  for (int w : nd)
-    if (nk.count(w) && !ring.count(w)) split_to.insert(w);
-  for (int t = 0; t < T.rows(); ++t) {
-    bool hk = false, hd = false;
-    for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
-    if (!hk || hd) continue;
-    std::array<int, 3> o{};
-    int m = 0;
-    for (int j = 0; j < 4; ++j)
-      if (T(t, j) != keep) o[m++] = T(t, j);
-    std::sort(o.begin(), o.end());
-    if (opposite_drop.count(o)) split_to.insert(o.begin(), o.end());
-  }
-  // Boundary edges of `drop` stay (splitting them would change the surface).
-  for (int f = 0; f < B.rows(); ++f) {
-    bool hd = false;
-    for (int j = 0; j < 3; ++j) hd |= B(f, j) == drop;
-    if (hd)
-      for (int j = 0; j < 3; ++j) split_to.erase(B(f, j));
-  }
-  const std::vector<int> bad(split_to.begin(), split_to.end());
-  std::vector<std::pair<int, int>> parents;
-  for (int w : bad) {
+  using Edge = std::pair<int, int>;
+  auto ordered = [](int a, int b) { return a < b ? Edge(a, b) : Edge(b, a); };
+  std::set<Edge> boundary_edges;
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) boundary_edges.insert(ordered(B(f, j), B(f, (j + 1) % 3)));
+  // Splits edge (a, b) at its midpoint: every tet of the edge is halved (orientation kept).
+  std::vector<Edge> parents;
+  auto split = [&](int a, int b) {
     const int m = static_cast<int>(rest.rows());
     rest.conservativeResize(m + 1, Eigen::NoChange);
     deformed.conservativeResize(m + 1, Eigen::NoChange);
-    rest.row(m) = 0.5 * (rest.row(drop) + rest.row(w));
-    deformed.row(m) = 0.5 * (deformed.row(drop) + deformed.row(w));
+    rest.row(m) = 0.5 * (rest.row(a) + rest.row(b));
+    deformed.row(m) = 0.5 * (deformed.row(a) + deformed.row(b));
     std::vector<int> edge_tets;
     for (int t = 0; t < T.rows(); ++t) {
-      bool hw = false, hd = false;
-      for (int j = 0; j < 4; ++j) hw |= T(t, j) == w, hd |= T(t, j) == drop;
-      if (hw && hd) edge_tets.push_back(t);
+      bool ha = false, hb = false;
+      for (int j = 0; j < 4; ++j) ha |= T(t, j) == a, hb |= T(t, j) == b;
+      if (ha && hb) edge_tets.push_back(t);
     }
     Eigen::Index next = T.rows();
     T.conservativeResize(next + static_cast<Eigen::Index>(edge_tets.size()), Eigen::NoChange);
     for (int t : edge_tets) {
       T.row(next) = T.row(t);
       for (int j = 0; j < 4; ++j) {
-        if (T(t, j) == w) T(t, j) = m;          // the half at drop
-        if (T(next, j) == drop) T(next, j) = m;  // the half at w
+        if (T(t, j) == b) T(t, j) = m;        // the half at a
+        if (T(next, j) == a) T(next, j) = m;  // the half at b
       }
       ++next;
     }
-    parents.emplace_back(drop, w);
+    parents.emplace_back(a, b);
+  };
+  // A few rounds: vertices first (the edge from `drop` split), then edges of both links outside
+  // the edge's ring (chords between two of its vertices: their midpoints are then vertices of both
+  // stars outside the ring, split off `drop` in the next round).
+  for (int round = 0; round < 4; ++round) {
+    std::set<int> nk, nd, ring;
+    std::set<Edge> ek, ed, ering;
+    std::set<std::array<int, 3>> opposite_drop;  // triangles opposite `drop` in its tets without `keep`
+    std::vector<std::array<int, 3>> opposite_keep;
+    for (int t = 0; t < T.rows(); ++t) {
+      bool hk = false, hd = false;
+      for (int j = 0; j < 4; ++j) hk |= T(t, j) == keep, hd |= T(t, j) == drop;
+      if (!hk && !hd) continue;
+      std::array<int, 3> o{};
+      int m = 0;
+      for (int j = 0; j < 4; ++j)
+        if (T(t, j) != keep && T(t, j) != drop) o[m++] = T(t, j);
+      for (int i = 0; i < m; ++i) {
+        if (hk) nk.insert(o[i]);
+        if (hd) nd.insert(o[i]);
+        if (hk && hd) ring.insert(o[i]);
+        for (int j = i + 1; j < m; ++j) {
+          const Edge e = ordered(o[i], o[j]);
+          if (hk && hd) ering.insert(e);
+          else if (hk) ek.insert(e);
+          else ed.insert(e);
+        }
+      }
+      if (m == 3) {
+        std::sort(o.begin(), o.end());
+        if (hd) opposite_drop.insert(o);
+        else opposite_keep.push_back(o);
+      }
+    }
+    // Vertices of both stars outside the edge's ring, and the vertices of triangles with a tet at
+    // each end (their tets would coincide even where the three are on the ring); not across a
+    // boundary edge (splitting it would change the surface).
+    std::set<int> split_to;
+    for (int w : nd)
+      if (nk.count(w) && !ring.count(w)) split_to.insert(w);
+    for (const auto& o : opposite_keep)
+      if (opposite_drop.count(o)) split_to.insert(o.begin(), o.end());
+    std::vector<int> to;
+    for (int w : split_to)
+      if (!boundary_edges.count(ordered(drop, w))) to.push_back(w);
+    if (!to.empty()) {
+      for (int w : to) split(drop, w);
+      continue;
+    }
+    std::vector<Edge> chords;
+    for (const Edge& e : ek)
+      if (ed.count(e) && !ering.count(e) && !boundary_edges.count(e)) chords.push_back(e);
+    if (chords.empty()) break;
+    for (const Edge& e : chords) split(e.first, e.second);
   }
   return parents;
 }

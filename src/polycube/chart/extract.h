@@ -120,14 +120,16 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
                        bool rest_may_tangle = false);
 
 /// Tet mode: prepares the boundary edge (keep, drop) for collapse_tet_edge where the link
-/// condition fails: the edges from `drop` to every vertex joined to both ends but not in a tet with
-/// both, and to the vertices of every triangle with a tet at each end (the collapse would make those
-/// two tets coincide), are split at their midpoints, so that the stars of the two ends meet only
-/// along the edge's own ring afterwards. Each new vertex is appended to rest and deformed (at the
-/// edge's midpoint in each: every tet of the edge is halved, its orientation kept) and every tet of
-/// the edge replaced by its two halves (the first in place, the second appended to T). Edges of B
-/// are not split (the surface stays). Returns the parents (drop, w) of the new vertices in the
-/// order they were appended (empty: nothing changed); collapse_tet_edge still decides.
+/// condition fails (the stars of the two ends meet outside the edge's ring): the edges from `drop`
+/// to every vertex joined to both ends but not in a tet with both, and to the vertices of every
+/// triangle with a tet at each end (the collapse would make those two tets coincide), are split at
+/// their midpoints; then edges in both stars' links but not in the edge's ring (chords) are split,
+/// and their midpoints split off `drop` in turn (at most four rounds). Each new vertex is appended
+/// to rest and deformed (at the edge's midpoint in each: every tet of the edge is halved, its
+/// orientation kept) and every tet of the edge replaced by its two halves (the first in place, the
+/// second appended to T). Edges of B are not split (the surface stays). Returns the ends of each
+/// split edge, in the order the new vertices were appended (a later one may end at an earlier new
+/// vertex; empty: nothing changed); collapse_tet_edge still decides.
 std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& deformed, MatX4i& T,
                                                           const MatX3i& B, int keep, int drop);
 
