@@ -982,10 +982,9 @@ std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& 
     }
     parents.emplace_back(a, b);
   };
-  // A few rounds: vertices first (the edge from `drop` split), then edges of both links outside
-  // the edge's ring (chords between two of its vertices: their midpoints are then vertices of both
-  // stars outside the ring, split off `drop` in the next round).
-  for (int round = 0; round < 4; ++round) {
+  // A few rounds: vertices first (the edge from `drop` split), then one edge of both links outside
+  // the edge's ring (a chord between two of their vertices) per round.
+  for (int round = 0; round < 8; ++round) {
     std::set<int> nk, nd, ring;
     std::set<Edge> ek, ed, ering;
     std::set<std::array<int, 3>> opposite_drop;  // triangles opposite `drop` in its tets without `keep`
@@ -1030,11 +1029,21 @@ std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& 
       for (int w : to) split(drop, w);
       continue;
     }
-    std::vector<Edge> chords;
-    for (const Edge& e : ek)
-      if (ed.count(e) && !ering.count(e) && !boundary_edges.count(e)) chords.push_back(e);
-    if (chords.empty()) break;
-    for (const Edge& e : chords) split(e.first, e.second);
+    // A chord (u, v) leaves `drop`'s link when the edge from `drop` to u or v is split (then only
+    // the new vertex, on the ring or in neither star, is joined to it), else when it is split
+    // itself; one split per round, the stars are measured again.
+    bool made = false;
+    for (const Edge& e : ek) {
+      if (!ed.count(e) || ering.count(e)) continue;
+      for (const Edge& s : {ordered(drop, e.first), ordered(drop, e.second), e})
+        if (!boundary_edges.count(s)) {
+          split(s.first, s.second);
+          made = true;
+          break;
+        }
+      if (made) break;
+    }
+    if (!made) break;
   }
   return parents;
 }
