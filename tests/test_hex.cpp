@@ -312,16 +312,10 @@ TEST(Hex, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {
   // Library users pass a tet mesh's V with its boundary as the target: the interior vertices
   // are no part of the surface and must not pull the fitting (spot in the bench: mean scaled
   // Jacobian 0.884 instead of the CLI's 0.947 while they were samples).
-  const MeshData l = examples::make("l_bracket", 0.1);
-  const TetMesh tm = tet_mesh_of(l.V, l.F, 3000);
+  const BentL bent = bent_l_block();  // the polycube is the L itself, the rest a bend of it
+  const TetMesh& tm = bent.tm;
+  const MatX3d& rest = bent.rest;
   ASSERT_TRUE(has_unreferenced_vertices(tm.V.rows(), tm.boundary)) << "the test needs interior vertices";
-  // The polycube is the L itself; the rest a shear-free bend of it (volume-preserving, injective),
-  // so the boundary hexes have to be fitted to a curved surface.
-  MatX3d rest = tm.V;
-  for (int v = 0; v < rest.rows(); ++v) {
-    rest(v, 0) += 0.1 * std::sin(M_PI * tm.V(v, 1));
-    rest(v, 2) += 0.1 * std::sin(M_PI * tm.V(v, 0));
-  }
   const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
   hex::HexOptions o;
   o.target_hexes = 800;

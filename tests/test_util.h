@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "polycube/core/types.h"
+#include "polycube/examples/examples.h"
 #include "polycube/io/mesh_data.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
@@ -143,6 +144,24 @@ inline TetMesh tet_mesh_of(const MatX3d& V, const MatX3i& F, int target_tets = 0
   TetMesh tm = tetrahedralize(s, l, o, {});
   split_boundary_tets(tm);
   return tm;
+}
+
+/// The l_bracket example's tet mesh (about 3000 tets, with interior vertices) as its own
+/// polycube (V), and `rest`: a smooth bend of it (x += 0.1 sin(pi y), z += 0.1 sin(pi x): volume
+/// kept, injective), so that hexes or quads mapped back have to be fitted to a curved surface.
+struct BentL {
+  TetMesh tm;
+  MatX3d rest;
+};
+inline BentL bent_l_block() {
+  const MeshData l = examples::make("l_bracket", 0.1);
+  BentL b{tet_mesh_of(l.V, l.F, 3000), MatX3d()};
+  b.rest = b.tm.V;
+  for (int v = 0; v < b.rest.rows(); ++v) {
+    b.rest(v, 0) += 0.1 * std::sin(M_PI * b.tm.V(v, 1));
+    b.rest(v, 2) += 0.1 * std::sin(M_PI * b.tm.V(v, 0));
+  }
+  return b;
 }
 
 /// n random rotations (uniform quaternions from a seeded generator).

@@ -17,7 +17,6 @@ namespace polycube::chart {
 
 namespace {
 
-// Tets of a realization's state (r.T over r.rest and r.X) that are not positive.
 // Vertices appended to the work mesh at `at` (split_edges_for_collapse: midpoints of `parents`)
 // inserted into a realization of it: after its first `at` vertices, before its own split ones.
 void insert_split_vertices(RealizeResult& r, Eigen::Index at, const std::vector<std::pair<int, int>>& parents) {
@@ -38,6 +37,7 @@ void insert_split_vertices(RealizeResult& r, Eigen::Index at, const std::vector<
       if (r.T(t, j) >= at) r.T(t, j) += static_cast<int>(k);
 }
 
+// Tets of a realization's state (r.T over r.rest and r.X) that are not positive.
 std::vector<int> inverted_tets(const RealizeResult& r) {
   auto volume = [&](const MatX3d& P, int t) {
     return tet_volume(P.row(r.T(t, 0)).transpose(), P.row(r.T(t, 1)).transpose(), P.row(r.T(t, 2)).transpose(),
