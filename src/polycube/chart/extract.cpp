@@ -1015,27 +1015,31 @@ std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& 
       }
     }
     // Vertices of both stars outside the edge's ring, and the vertices of triangles with a tet at
-    // each end (their tets would coincide even where the three are on the ring); not across a
-    // boundary edge (splitting it would change the surface).
+    // each end (their tets would coincide even where the three are on the ring). Boundary edges
+    // are never split (that would change the surface).
     std::set<int> split_to;
     for (int w : nd)
       if (nk.count(w) && !ring.count(w)) split_to.insert(w);
     for (const auto& o : opposite_keep)
       if (opposite_drop.count(o)) split_to.insert(o.begin(), o.end());
-    std::vector<int> to;
+    // Where the edge from `drop` is a boundary edge, the one from `keep` (humanoid: a boundary
+    // triangle of `drop` would land on an interior face of `keep`'s star).
+    std::vector<Edge> to;
     for (int w : split_to)
-      if (!boundary_edges.count(ordered(drop, w))) to.push_back(w);
+      if (!boundary_edges.count(ordered(drop, w))) to.emplace_back(drop, w);
+      else if (!boundary_edges.count(ordered(keep, w))) to.emplace_back(keep, w);
     if (!to.empty()) {
-      for (int w : to) split(drop, w);
+      for (const Edge& e : to) split(e.first, e.second);
       continue;
     }
     // A chord (u, v) leaves `drop`'s link when the edge from `drop` to u or v is split (then only
-    // the new vertex, on the ring or in neither star, is joined to it), else when it is split
-    // itself; one split per round, the stars are measured again.
+    // the new vertex, on the ring or in neither star, is joined to it), else `keep`'s from the edge
+    // to u or v, else it is split itself; one split per round, the stars are measured again.
     bool made = false;
     for (const Edge& e : ek) {
       if (!ed.count(e) || ering.count(e)) continue;
-      for (const Edge& s : {ordered(drop, e.first), ordered(drop, e.second), e})
+      for (const Edge& s : {ordered(drop, e.first), ordered(drop, e.second), ordered(keep, e.first),
+                            ordered(keep, e.second), e})
         if (!boundary_edges.count(s)) {
           split(s.first, s.second);
           made = true;

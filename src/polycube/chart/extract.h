@@ -123,9 +123,10 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
 /// condition fails (the stars of the two ends meet outside the edge's ring): the edges from `drop`
 /// to every vertex joined to both ends but not in a tet with both, and to the vertices of every
 /// triangle with a tet at each end (the collapse would make those two tets coincide), are split at
-/// their midpoints; then, one per round, an edge in both stars' links but not in the edge's ring (a
-/// chord) leaves `drop`'s link: the edge from `drop` to one of its ends is split, or else the chord
-/// itself (at most eight rounds, the stars measured again each time). Each new vertex is appended
+/// their midpoints (the edges from `keep` where those are boundary edges); then, one per round, an
+/// edge in both stars' links but not in the edge's ring (a chord) leaves a link: the edge from
+/// `drop`, else from `keep`, to one of its ends is split, or else the chord itself (at most eight
+/// rounds, the stars measured again each time). Each new vertex is appended
 /// to rest and deformed (at the edge's midpoint in each: every tet of the edge is halved, its
 /// orientation kept) and every tet of the edge replaced by its two halves (the first in place, the
 /// second appended to T). Edges of B are not split (the surface stays). Returns the ends of each
