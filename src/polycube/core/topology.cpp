@@ -43,6 +43,12 @@ bool has_unreferenced_vertices(Eigen::Index nv, const MatX3i& F) {
   return std::find(used.begin(), used.end(), 0) != used.end();
 }
 
+const SurfaceMesh& surface_alone(const SurfaceMesh& s, SurfaceMesh& storage) {
+  if (!has_unreferenced_vertices(s.V.rows(), s.F)) return s;
+  storage = compact_surface(s.V, s.F);
+  return storage;
+}
+
 SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* kept) {
   std::vector<int> id(V.rows(), -1), back;
   SurfaceMesh s;

@@ -39,6 +39,11 @@ SurfaceMesh compact_surface(const MatX3d& V, const MatX3i& F, std::vector<int>* 
 /// Whether some vertex 0..nv-1 is used by no triangle of F.
 bool has_unreferenced_vertices(Eigen::Index nv, const MatX3i& F);
 
+/// `s` itself if every vertex is used by a triangle, else its triangles alone (compact_surface)
+/// kept in `storage`: for code that takes a surface's vertices for points of it (a tet mesh's V
+/// passed with its boundary would add the interior).
+const SurfaceMesh& surface_alone(const SurfaceMesh& s, SurfaceMesh& storage);
+
 /// Sorted neighbour lists of every vertex (0..nv) along the given undirected edges.
 std::vector<std::vector<int>> vertex_neighbors(int nv, const std::vector<std::pair<int, int>>& edges);
 

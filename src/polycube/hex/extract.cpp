@@ -58,9 +58,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   // Vertices no triangle of the target uses (e.g. a tet mesh's interior when its V and boundary are
   // passed) would be taken for surface points by the fitting's samples: keep the triangles' alone.
   SurfaceMesh compacted;
-  if (target_in && has_unreferenced_vertices(target_in->V.rows(), target_in->F))
-    compacted = compact_surface(target_in->V, target_in->F);
-  const SurfaceMesh* target = compacted.V.rows() > 0 ? &compacted : target_in;
+  const SurfaceMesh* target = target_in ? &surface_alone(*target_in, compacted) : nullptr;
   POLYCUBE_ASSERT(static_cast<int>(labels.size()) == B.rows(), "one label per boundary triangle");
   POLYCUBE_ASSERT(rest.rows() == X.rows(), "rest and polycube positions differ in size");
 

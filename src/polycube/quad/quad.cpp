@@ -79,10 +79,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
                        const std::vector<char>& pinned) {
   // Vertices no triangle uses (e.g. a tet mesh's interior when its V and boundary are passed)
   // would be taken for surface points by the crease checks and the fitting's samples.
-  const SurfaceMesh compacted = has_unreferenced_vertices(target_in.V.rows(), target_in.F)
-                                    ? compact_surface(target_in.V, target_in.F)
-                                    : SurfaceMesh{};
-  const SurfaceMesh& target = compacted.V.rows() > 0 ? compacted : target_in;
+  SurfaceMesh compacted;
+  const SurfaceMesh& target = surface_alone(target_in, compacted);
   const int n = static_cast<int>(r.V.rows());
   r.extracted = quad_quality(r.V, r.Q);
 
