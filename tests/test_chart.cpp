@@ -844,3 +844,27 @@ TEST(Chart, SplittingEdgesLetsACollapseMeetTheLinkCondition) {
   EXPECT_EQ(passed, found);
   }
 }
+
+// Isometric distortion max(s1, 1/s3) with known answers: a tet scaled by 2 along x has 2; one
+// squashed to 1e-4 of its height along z has 1e4 and counts as nearly flat; one at 0.01 does not.
+TEST(Chart, IsometricDistortionCountsNearlyFlatTets) {
+  MatX3d rest(5, 3);
+  rest << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, -1;
+  MatX4i T(2, 4);
+  T << 0, 1, 2, 3, 0, 2, 1, 4;
+  auto run = [&](double sx, double sz) {
+    MatX3d X = rest;
+    X.col(0) *= sx;
+    X(3, 2) *= sz;
+    return chart::isometric_distortion(rest, X, T);
+  };
+  const chart::Distortion a = run(2.0, 1.0);
+  EXPECT_NEAR(a.min, 2.0, 1e-12);
+  EXPECT_NEAR(a.max, 2.0, 1e-12);
+  EXPECT_EQ(a.nearly_flat, 0);
+  const chart::Distortion b = run(1.0, 1e-4);
+  EXPECT_NEAR(b.max, 1e4, 1e-6);
+  EXPECT_NEAR(b.min, 1.0, 1e-12);  // the other tet is untouched
+  EXPECT_EQ(b.nearly_flat, 1);
+  EXPECT_EQ(run(1.0, 1e-2).nearly_flat, 0);
+}

@@ -222,6 +222,23 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // but a few boundary triangles face away from their label, the shortest edge of each is
   // collapsed too (surface mode's repair of folded triangles; humanoid ended with one such
   // triangle, its relabelling undone by the cleanup).
+  // The boundary edges (rows of bedges, sorted) of r's inverted tets whose two ends r put at one
+  // point: the collapse candidates.
+  auto pinned_edges = [&](const RealizeResult& r, const std::vector<std::pair<int, int>>& bedges) {
+    std::vector<std::pair<int, int>> cand;
+    if (r.X.rows() == 0 || r.T.rows() == 0) return cand;
+    const int n = static_cast<int>(cur_rest.rows());
+    const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+    for (int t : inverted_tets(r)) {
+      for (int a = 0; a < 4; ++a)
+        for (int b = a + 1; b < 4; ++b) {
+          const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
+          if (v >= n || (r.X.row(u) - r.X.row(v)).norm() > 1e-6 * diag) continue;
+          if (std::binary_search(bedges.begin(), bedges.end(), std::make_pair(u, v))) cand.emplace_back(u, v);
+        }
+    }
+    return cand;
+  };
   auto try_collapse = [&](bool folded = false) -> int {
     const RealizeResult& r = e.realized;
     const bool fold_case = folded && r.inverted == 0 && r.misoriented_faces > 0 &&
@@ -249,14 +266,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         hooks.debug("folded triangle " + std::to_string(cb_row[f]) + ": its shortest edge " + std::to_string(u) +
                     "-" + std::to_string(v) + " is a collapse candidate");
       }
-    for (int t : inverted_tets(r)) {
-      for (int a = 0; a < 4; ++a)
-        for (int b = a + 1; b < 4; ++b) {
-          const int u = std::min(r.T(t, a), r.T(t, b)), v = std::max(r.T(t, a), r.T(t, b));
-          if (v >= n || (r.X.row(u) - r.X.row(v)).norm() > 1e-6 * diag) continue;
-          if (std::binary_search(bedges.begin(), bedges.end(), std::make_pair(u, v))) cand.emplace_back(u, v);
-        }
-    }
+    const auto pinned = pinned_edges(r, bedges);
+    cand.insert(cand.end(), pinned.begin(), pinned.end());
     std::sort(cand.begin(), cand.end());
     cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
     if (cand.empty()) return 0;
@@ -446,7 +457,15 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       const bool better = warm.X.rows() > 0 && (warm.inverted < e.realized.inverted ||
                                                 (warm.inverted == e.realized.inverted &&
                                                  warm.misoriented_faces < e.realized.misoriented_faces));
-      if (warm.success || better) {
+      // Also kept when its few inverted tets pin a boundary edge's ends to one point: the next
+      // step collapses that edge, where a realization from the deformed mesh would mostly come
+      // back to the same pinned edge after a much longer path (fandisk at 37.8k tets: 2 tets at
+      // edge 214-223 either way, the cold path 60 s of continuation and untangling).
+      const bool pinned = !better && T.rows() > 0 && warm.inverted > 0 &&
+                          warm.inverted <= opt.max_relabel_inverted && collapse_rounds < opt.tet_collapse_rounds &&
+                          !pinned_edges(warm, unique_edges(CB)).empty();
+      if (warm.success || better || pinned) {
+        if (pinned) hooks.debug("the previous one's state pins a boundary edge of its inverted tets: kept for its collapse");
         warm_kept += !warm.success;
         hooks.debug("realization from the previous one's state: " +
                     (warm.success ? std::string("success") : warm.failure));

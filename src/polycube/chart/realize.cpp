@@ -758,6 +758,7 @@ Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4
     const double iso = s[2] > 0 ? std::max(s[0], 1.0 / s[2]) : std::numeric_limits<double>::infinity();
     d.min = std::min(d.min, iso);
     d.max = std::max(d.max, iso);
+    d.nearly_flat += iso > kNearlyFlat;
     const double w = std::abs(Dm.determinant());
     d.mean += w * iso;
     wsum += w;

@@ -59,7 +59,12 @@ struct RealizeOptions {
 /// Isometric distortion max(s1, 1/s3) of the map from the rest tets to the polycube tets.
 struct Distortion {
   double min = 0, mean = 0, max = 0;
+  /// Elements whose isometric distortion exceeds kNearlyFlat: positive, so the map is valid, but
+  /// nearly flat in the polycube (or at rest), where a hex or quad mapped through them is crushed.
+  int nearly_flat = 0;
 };
+/// Threshold of Distortion::nearly_flat.
+constexpr double kNearlyFlat = 1e3;
 
 struct RealizeResult {
   bool success = false;

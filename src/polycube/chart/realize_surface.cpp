@@ -73,6 +73,7 @@ Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, con
     const double iso = s2 > 0 ? std::max(s1, 1.0 / s2) : std::numeric_limits<double>::infinity();
     d.min = std::min(d.min, iso);
     d.max = std::max(d.max, iso);
+    d.nearly_flat += iso > kNearlyFlat;
     d.mean += a * iso;
     wsum += a;
   }

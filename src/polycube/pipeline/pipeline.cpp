@@ -566,7 +566,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (opt.surface) pj["edge_flips"] = ex.edge_flips;
       pj["edge_collapses"] = ex.edge_collapses;
       pj["collapse_edge_splits"] = ex.collapse_edge_splits;
-      pj["isometric_distortion"] = {{"min", rr.isometric.min}, {"mean", rr.isometric.mean}, {"max", rr.isometric.max}};
+      pj["isometric_distortion"] = {{"min", rr.isometric.min},
+                                    {"mean", rr.isometric.mean},
+                                    {"max", rr.isometric.max},
+                                    {"nearly_flat", rr.isometric.nearly_flat}};
+      if (rr.isometric.nearly_flat > 0)
+        hooks.warn("the polycube map is nearly degenerate at " + std::to_string(rr.isometric.nearly_flat) +
+                   (opt.surface ? " triangles" : " tets") + " (isometric distortion above " +
+                   std::to_string(static_cast<int>(chart::kNearlyFlat)) + ", max " + std::to_string(rr.isometric.max) +
+                   "): valid, but elements mapped through them are crushed");
       if (input_closed) {
         // Every tet positive does not make the polycube embedded: count lines meeting two faces of
         // the same orientation in a row (the polycube overlaps itself there).
