@@ -210,18 +210,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
   };
-  // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
-  // point (where admissible); returns how many.
   // Whether row f of CB faces away from its label (or has no area) in the polycube X (diag: X's
   // bounding-box diagonal).
   auto faces_away = [&](const MatX3d& X, int f, double diag) {
     const Vec3 a = X.row(CB(f, 0)), b = X.row(CB(f, 1)), c = X.row(CB(f, 2));
     return !((b - a).cross(c - a).dot(label_direction(CL[f])) > 1e-14 * diag * diag);
   };
-  // With `folded` (the last resort, once relabelling has come to nothing): when no tet is inverted
-  // but a few boundary triangles face away from their label, the shortest edge of each is
-  // collapsed too (surface mode's repair of folded triangles; humanoid ended with one such
-  // triangle, its relabelling undone by the cleanup).
   // The boundary edges (rows of bedges, sorted) of r's inverted tets whose two ends r put at one
   // point: the collapse candidates.
   auto pinned_edges = [&](const RealizeResult& r, const std::vector<std::pair<int, int>>& bedges) {
@@ -239,6 +233,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     }
     return cand;
   };
+  // Collapses the boundary edges of inverted tets whose two ends the failed realization put at one
+  // point (where admissible); returns how many.
+  // With `folded` (the last resort, once relabelling has come to nothing): when no tet is inverted
+  // but a few boundary triangles face away from their label, the shortest edge of each is
+  // collapsed too (surface mode's repair of folded triangles; humanoid ended with one such
+  // triangle, its relabelling undone by the cleanup).
   auto try_collapse = [&](bool folded = false) -> int {
     const RealizeResult& r = e.realized;
     const bool fold_case = folded && r.inverted == 0 && r.misoriented_faces > 0 &&
