@@ -130,6 +130,9 @@ int main(int argc, char** argv) {
   double quad_beta = 0;
   app.add_option("--quad-beta", quad_beta, "With --quad-table: the complexity penalty weight beta of the deformation")
       ->capture_default_str();
+  bool deform_only = false;
+  app.add_flag("--deform-only", deform_only,
+               "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
   CLI11_PARSE(app, argc, argv);
   if (quad_table) return quad_bench(shared, only, quad_beta);
 
@@ -187,6 +190,14 @@ int main(int argc, char** argv) {
         secs.push_back(r.seconds);
       }
       std::sort(secs.begin(), secs.end());
+      if (deform_only) {
+        std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | | | | | | %d | | %s | %s | %s | %s | %s |\n",
+                    m.file.c_str(), (long)tm.T.rows(), dopt.beta, r.iterations, r.alpha_steps, r.factorizations,
+                    secs[secs.size() / 2], r.l1_quality, r.arap, r.inverted, p1.c_str(), p2.c_str(), p3.c_str(),
+                    p4.c_str(), p5.c_str());
+        std::fflush(stdout);
+        continue;
+      }
       const Stopwatch extraction_clock;  // labelling, cleanup, every realization and retry
       const chart::PolycubeExtraction e = chart::extract_polycube(tm.V, tm.T, tm.boundary, r.X);
       const double extraction_seconds = extraction_clock.seconds();

@@ -130,6 +130,51 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
   EXPECT_LE((z0 - x0).norm(), 1e-4 * x0.norm());
 }
 
+// The preconditioner's single-precision copy of a supernodal factor solves the system to float
+// accuracy, CG with it reaches a tight tolerance, and a simplicial factor falls back to CHOLMOD.
+TEST(SparseSystem, FloatPreconditionerMatchesTheDoubleSolve) {
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 8000);
+  const int n = static_cast<int>(tm.V.rows());
+  std::vector<std::vector<int>> elements;
+  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
+  deform::SparseSystem sys(n, elements);
+  sys.cache_elements(elements);
+  const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
+  deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, &sys);
+  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, &sys);
+  sys.add_diagonal(1e-3 * sys.mean_diagonal());
+  ASSERT_TRUE(sys.factorize());
+  ASSERT_TRUE(sys.factor_ptr()->is_super) << "CHOLMOD chose a simplicial factor: the test needs a larger mesh";
+  deform::FloatFactor f;
+  ASSERT_TRUE(f.assign(sys.factor_ptr()));
+  std::mt19937 rng(11);
+  std::normal_distribution<double> N01;
+  Eigen::VectorXd b(3 * n);
+  for (int i = 0; i < 3 * n; ++i) b[i] = N01(rng);
+  const Eigen::VectorXd xd = sys.solve(b), xf = sys.precondition(b);
+  EXPECT_GT((xf - xd).norm(), 0.0);  // float, not the double solve
+  EXPECT_LE((xf - xd).norm(), 1e-4 * xd.norm());
+  Eigen::VectorXd x;
+  const int its = sys.solve_pcg(b, x, 1e-10, 50);
+  EXPECT_GT(its, 0);
+  EXPECT_LE(its, 6);
+  EXPECT_LE((sys.multiply(x) - b).norm(), 1e-10 * b.norm());
+
+  // A tiny system gets a simplicial factor: no float copy, the preconditioner is the double solve.
+  const int m = 8;
+  std::vector<std::vector<int>> chain;
+  for (int i = 0; i + 3 < m; ++i) chain.push_back({i, i + 1, i + 2, i + 3});
+  deform::SparseSystem small(m, chain);
+  Eigen::Matrix<double, 12, 12> K = Eigen::Matrix<double, 12, 12>::Identity();
+  for (const auto& e : chain) small.add(e.data(), 4, K);
+  ASSERT_TRUE(small.factorize());
+  EXPECT_FALSE(f.assign(small.factor_ptr()));
+  EXPECT_TRUE(f.empty());
+  const Eigen::VectorXd c = Eigen::VectorXd::LinSpaced(3 * m, 1, 2);
+  EXPECT_EQ((small.precondition(c) - small.solve(c)).norm(), 0.0);
+}
+
 TEST(Deform, TwoRunsGiveTheSameResultBitForBit) {
   // Reproducibility with the threads of the solver (solves side by side, ARAP gradient on its own
   // thread above 4000 tets): nothing may depend on which thread finishes first.

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "polycube/deform/energies.h"
+#include "polycube/deform/float_factor.h"
 
 namespace polycube::deform {
 
@@ -33,6 +34,19 @@ class SparseSystem : public HessianSink {
   /// Current values (upper triangle, CSC order); copy/restore for a constant part.
   std::vector<double>& values() { return values_; }
   void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override;
+  /// A sink with this system's pattern that adds into `values` (sized like values()) instead, so
+  /// that two threads can assemble terms side by side and the caller sums the arrays after.
+  class Buffer : public HessianSink {
+   public:
+    Buffer(const SparseSystem& sys, std::vector<double>& values) : sys_(sys), values_(values) {}
+    void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override {
+      sys_.add_to(values_, v, nv, H);
+    }
+
+   private:
+    const SparseSystem& sys_;
+    std::vector<double>& values_;
+  };
   /// Precomputes the value positions of the 4-vertex elements given to the constructor (tets
   /// first), so that add() of those elements skips the index search.
   void cache_elements(const std::vector<std::vector<int>>& elements);
@@ -48,10 +62,14 @@ class SparseSystem : public HessianSink {
   double factor_to_cg_cost() const;
   /// x = A^-1 b with the last factorization. Calls with different `slot`s may run concurrently.
   Eigen::VectorXd solve(const Eigen::VectorXd& b, int slot = 0) const;
+  /// Applies the preconditioner: A^-1 b with the single-precision copy of the last factorization
+  /// (CHOLMOD's double solve when the factor is not supernodal). Concurrent calls need different slots.
+  Eigen::VectorXd precondition(const Eigen::VectorXd& b, int slot = 0) const;
   /// y = A x with the current values (the factorization may be of older ones).
   Eigen::VectorXd multiply(const Eigen::VectorXd& x) const;
   /// Solves A x = b with the current values by conjugate gradients preconditioned with the last
-  /// factorization (exact in one step when it is of the current values). Returns the iterations
+  /// factorization (its single-precision copy: a few iterations even when it is of the current
+  /// values). Returns the iterations
   /// used, or -1 if the relative residual did not fall below `tol` within `max_iter`. (Starting
   /// from the previous iteration's solution was tried: its stale smooth components pass the
   /// residual test, and the SQP stalled on a sphere.)
@@ -64,9 +82,11 @@ class SparseSystem : public HessianSink {
   void solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
                   Eigen::VectorXd& x1) const;
   int dofs() const { return 3 * n_; }
+  cholmod_factor* factor_ptr() const { return llt_ ? llt_->factor() : nullptr; }
 
  private:
   int position(int vi, int vj, int a, int b) const;  // vi <= vj
+  void add_to(std::vector<double>& values, const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) const;
   int n_;
   std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
@@ -82,9 +102,11 @@ class SparseSystem : public HessianSink {
     cholmod_dense* x = nullptr;
     cholmod_dense* y = nullptr;
     cholmod_dense* e = nullptr;
+    std::vector<float> work;  // FloatFactor::solve's scratch
   };
   mutable std::array<Slot, kSlots> slots_;
   bool analyzed_ = false;
+  FloatFactor float_factor_;  // single-precision copy of llt_'s factor (empty if not supernodal)
 };
 
 }  // namespace polycube::deform
