@@ -155,6 +155,19 @@ TEST(SparseSystem, FloatPreconditionerMatchesTheDoubleSolve) {
   const Eigen::VectorXd xd = sys.solve(b), xf = sys.precondition(b);
   EXPECT_GT((xf - xd).norm(), 0.0);  // float, not the double solve
   EXPECT_LE((xf - xd).norm(), 1e-4 * xd.norm());
+  // Two right-hand sides at once, on two threads over their own subtrees: the same solutions to
+  // float accuracy, and bit for bit the same from one call to the next.
+  Eigen::VectorXd b2(3 * n);
+  for (int i = 0; i < 3 * n; ++i) b2[i] = N01(rng);
+  std::vector<float> work;
+  Eigen::VectorXd y0(3 * n), y1(3 * n), z0(3 * n), z1(3 * n);
+  f.solve2(b.data(), b2.data(), y0.data(), y1.data(), work);
+  f.solve2(b.data(), b2.data(), z0.data(), z1.data(), work);
+  EXPECT_EQ((y0 - z0).norm(), 0.0);
+  EXPECT_EQ((y1 - z1).norm(), 0.0);
+  const Eigen::VectorXd xd2 = sys.solve(b2);
+  EXPECT_LE((y0 - xd).norm(), 1e-4 * xd.norm());
+  EXPECT_LE((y1 - xd2).norm(), 1e-4 * xd2.norm());
   Eigen::VectorXd x;
   const int its = sys.solve_pcg(b, x, 1e-10, 50);
   EXPECT_GT(its, 0);

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "polycube/core/parallel.h"
+
 namespace polycube::deform {
 
 namespace {
@@ -36,13 +38,93 @@ inline __attribute__((always_inline)) void axpy(float* __restrict y, const float
   for (; i < n; ++i) y[i] += a * x[i];
 }
 
+inline __attribute__((always_inline)) float hsum(v8f a) {
+  return ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]));
+}
+
+// Two accumulators of eight lanes (the additions' latency, not the loads, bound one chain).
 inline __attribute__((always_inline)) float dot(const float* __restrict x, const float* __restrict y, int n) {
-  v8f acc = {0, 0, 0, 0, 0, 0, 0, 0};
+  v8f a = {0, 0, 0, 0, 0, 0, 0, 0}, b = a;
   int i = 0;
-  for (; i + 8 <= n; i += 8) acc += load8(x + i) * load8(y + i);
+  for (; i + 16 <= n; i += 16) {
+    a += load8(x + i) * load8(y + i);
+    b += load8(x + i + 8) * load8(y + i + 8);
+  }
+  if (i + 8 <= n) {
+    a += load8(x + i) * load8(y + i);
+    i += 8;
+  }
   float s = 0;
   for (; i < n; ++i) s += x[i] * y[i];
-  return s + ((acc[0] + acc[4]) + (acc[1] + acc[5])) + ((acc[2] + acc[6]) + (acc[3] + acc[7]));
+  return s + hsum(a + b);
+}
+
+inline __attribute__((always_inline)) void axpy2(float* __restrict y0, float* __restrict y1, const float* __restrict x,
+                                                 float a0, float a1, int n) {
+  int i = 0;
+  const v8f va0 = {a0, a0, a0, a0, a0, a0, a0, a0}, va1 = {a1, a1, a1, a1, a1, a1, a1, a1};
+  for (; i + 8 <= n; i += 8) {
+    const v8f xi = load8(x + i);
+    store8(y0 + i, load8(y0 + i) + va0 * xi);
+    store8(y1 + i, load8(y1 + i) + va1 * xi);
+  }
+  for (; i < n; ++i) {
+    y0[i] += a0 * x[i];
+    y1[i] += a1 * x[i];
+  }
+}
+
+// dot() of x with y0 and with y1, in the same arithmetic.
+inline __attribute__((always_inline)) void dot2(const float* __restrict x, const float* __restrict y0,
+                                                const float* __restrict y1, int n, float& d0, float& d1) {
+  v8f a0 = {0, 0, 0, 0, 0, 0, 0, 0}, b0 = a0, a1 = a0, b1 = a0;
+  int i = 0;
+  for (; i + 16 <= n; i += 16) {
+    const v8f xa = load8(x + i), xb = load8(x + i + 8);
+    a0 += xa * load8(y0 + i);
+    b0 += xb * load8(y0 + i + 8);
+    a1 += xa * load8(y1 + i);
+    b1 += xb * load8(y1 + i + 8);
+  }
+  if (i + 8 <= n) {
+    const v8f xa = load8(x + i);
+    a0 += xa * load8(y0 + i);
+    a1 += xa * load8(y1 + i);
+    i += 8;
+  }
+  float s0 = 0, s1 = 0;
+  for (; i < n; ++i) {
+    s0 += x[i] * y0[i];
+    s1 += x[i] * y1[i];
+  }
+  d0 = s0 + hsum(a0 + b0);
+  d1 = s1 + hsum(a1 + b1);
+}
+
+// Four columns (x, x + ld, x + 2 ld, x + 3 ld) dotted with y0 and y1: d[c] and d[4 + c]. One load
+// of y0 and y1 serves four columns, and eight independent chains hide the additions' latency.
+inline __attribute__((always_inline)) void dot4x2(const float* __restrict x, int ld, const float* __restrict y0,
+                                                  const float* __restrict y1, int n, float* d) {
+  const v8f z = {0, 0, 0, 0, 0, 0, 0, 0};
+  v8f a[4] = {z, z, z, z}, b[4] = {z, z, z, z};
+  int i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const v8f u = load8(y0 + i), w = load8(y1 + i);
+    for (int c = 0; c < 4; ++c) {
+      const v8f xc = load8(x + static_cast<long>(c) * ld + i);
+      a[c] += xc * u;
+      b[c] += xc * w;
+    }
+  }
+  for (int c = 0; c < 4; ++c) {
+    float s0 = 0, s1 = 0;
+    for (int k = i; k < n; ++k) {
+      s0 += x[static_cast<long>(c) * ld + k] * y0[k];
+      s1 += x[static_cast<long>(c) * ld + k] * y1[k];
+    }
+    d[c] = s0 + hsum(a[c]);
+    d[4 + c] = s1 + hsum(b[c]);
+  }
 }
 
 // L y = y (permuted vector), supernode by supernode: the supernode's rows are gathered into t,
@@ -77,11 +159,97 @@ void backward(int nsuper, const int* super, const int* pi, const int* px, const 
     const float* L = X + px[s];
     const int* rows = srows + psi;
     for (int i = 0; i < nsrow; ++i) t[i] = y[rows[i]];
+    // The rows below the diagonal block first, columns in increasing order (the factor read
+    // forwards, as the prefetchers like: descending columns made this sweep twice the forward's
+    // time), then the triangle of the diagonal block backwards.
+    for (int j = 0; j < nscol; ++j) t[j] -= dot(L + static_cast<long>(j) * nsrow + nscol, t + nscol, nsrow - nscol);
     for (int j = nscol - 1; j >= 0; --j) {
       const float* col = L + static_cast<long>(j) * nsrow;
-      t[j] = (t[j] - dot(col + j + 1, t + j + 1, nsrow - j - 1)) * dinv[k1 + j];
+      t[j] = (t[j] - dot(col + j + 1, t + j + 1, nscol - j - 1)) * dinv[k1 + j];
     }
     for (int i = 0; i < nscol; ++i) y[k1 + i] = t[i];
+  }
+}
+
+// The same two sweeps over a range of supernodes, for two right-hand sides at once (the factor is
+// read once for both: the sweeps are bound by memory bandwidth). `owner` gives, per column, the
+// part it belongs to; the forward sweep of part `part` adds its updates of other parts' rows (its
+// ancestors, always in the top part) into `extra` instead of y when extra is given.
+POLYCUBE_MULTIVERSION
+void forward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
+              const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1, const signed char* owner,
+              int part, float* extra0, float* extra1) {
+  for (int s = s_begin; s < s_end; ++s) {
+    const int k1 = super[s], nscol = super[s + 1] - k1;
+    const int psi = pi[s], nsrow = pi[s + 1] - psi;
+    const float* L = X + px[s];
+    const int* rows = srows + psi;
+    for (int i = 0; i < nscol; ++i) {
+      t0[i] = y0[k1 + i];
+      t1[i] = y1[k1 + i];
+    }
+    std::fill(t0 + nscol, t0 + nsrow, 0.0f);
+    std::fill(t1 + nscol, t1 + nsrow, 0.0f);
+    for (int j = 0; j < nscol; ++j) {
+      const float a0 = t0[j] * dinv[k1 + j], a1 = t1[j] * dinv[k1 + j];
+      t0[j] = a0;
+      t1[j] = a1;
+      axpy2(t0 + j + 1, t1 + j + 1, L + static_cast<long>(j) * nsrow + j + 1, -a0, -a1, nsrow - j - 1);
+    }
+    for (int i = 0; i < nscol; ++i) {
+      y0[k1 + i] = t0[i];
+      y1[k1 + i] = t1[i];
+    }
+    for (int i = nscol; i < nsrow; ++i) {
+      const int r = rows[i];
+      if (extra0 && owner[r] != part) {
+        extra0[r] += t0[i];
+        extra1[r] += t1[i];
+      } else {
+        y0[r] += t0[i];
+        y1[r] += t1[i];
+      }
+    }
+  }
+}
+
+POLYCUBE_MULTIVERSION
+void backward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
+               const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1) {
+  for (int s = s_end - 1; s >= s_begin; --s) {
+    const int k1 = super[s], nscol = super[s + 1] - k1;
+    const int psi = pi[s], nsrow = pi[s + 1] - psi;
+    const float* L = X + px[s];
+    const int* rows = srows + psi;
+    for (int i = 0; i < nsrow; ++i) {
+      t0[i] = y0[rows[i]];
+      t1[i] = y1[rows[i]];
+    }
+    float d0, d1;
+    int j = 0;
+    for (; j + 4 <= nscol; j += 4) {  // as in backward(), four columns at a time
+      float d[8];
+      dot4x2(L + static_cast<long>(j) * nsrow + nscol, nsrow, t0 + nscol, t1 + nscol, nsrow - nscol, d);
+      for (int c = 0; c < 4; ++c) {
+        t0[j + c] -= d[c];
+        t1[j + c] -= d[4 + c];
+      }
+    }
+    for (; j < nscol; ++j) {
+      dot2(L + static_cast<long>(j) * nsrow + nscol, t0 + nscol, t1 + nscol, nsrow - nscol, d0, d1);
+      t0[j] -= d0;
+      t1[j] -= d1;
+    }
+    for (int j = nscol - 1; j >= 0; --j) {
+      const float* col = L + static_cast<long>(j) * nsrow;
+      dot2(col + j + 1, t0 + j + 1, t1 + j + 1, nscol - j - 1, d0, d1);
+      t0[j] = (t0[j] - d0) * dinv[k1 + j];
+      t1[j] = (t1[j] - d1) * dinv[k1 + j];
+    }
+    for (int i = 0; i < nscol; ++i) {
+      y0[k1 + i] = t0[i];
+      y1[k1 + i] = t1[i];
+    }
   }
 }
 
@@ -121,7 +289,129 @@ bool FloatFactor::assign(const cholmod_factor* L) {
   for (int s = 0; s < nsuper; ++s) max_rows_ = std::max(max_rows_, pi[s + 1] - pi[s]);
   nsuper_ = nsuper;
   n_ = n;
+  partition();
   return true;
+}
+
+// Splits the supernodal elimination tree for two threads: a top part (processed by one thread,
+// after the rest in the forward sweep and before it in the backward one) and independent subtrees
+// dealt to the two threads. The supernodes are in postorder (CHOLMOD's default), so a subtree is a
+// contiguous range ending at its root. Starting from the roots, the heaviest subtree is moved to
+// the top part (its children become subtrees) as long as that lowers the estimated time, the top's
+// work plus the larger thread's (work = entries of the factor read).
+void FloatFactor::partition() {
+  const int ns = nsuper_;
+  std::vector<int> col_super(n_), parent(ns, -1), first(ns);
+  std::vector<double> work(ns), subtree(ns);
+  for (int s = 0; s < ns; ++s) {
+    for (int k = super_[s]; k < super_[s + 1]; ++k) col_super[k] = s;
+    first[s] = s;
+    const int nscol = super_[s + 1] - super_[s], nsrow = pi_[s + 1] - pi_[s];
+    work[s] = subtree[s] = static_cast<double>(nscol) * nsrow;
+  }
+  std::vector<std::vector<int>> children(ns);
+  std::vector<int> roots;
+  for (int s = 0; s < ns; ++s) {
+    const int nscol = super_[s + 1] - super_[s], nsrow = pi_[s + 1] - pi_[s];
+    if (nsrow > nscol) parent[s] = col_super[s_[pi_[s] + nscol]];
+    if (parent[s] >= 0) {
+      children[parent[s]].push_back(s);
+      subtree[parent[s]] += subtree[s];
+      first[parent[s]] = std::min(first[parent[s]], first[s]);
+    } else {
+      roots.push_back(s);
+    }
+  }
+  // Greedy dealing (largest first, to the lighter thread) of a set of subtrees.
+  auto deal = [&](std::vector<int> set, std::vector<int>* bin0, std::vector<int>* bin1) {
+    std::sort(set.begin(), set.end(), [&](int a, int b) { return subtree[a] > subtree[b] || (subtree[a] == subtree[b] && a < b); });
+    double w0 = 0, w1 = 0;
+    for (int r : set) {
+      if (w0 <= w1) {
+        w0 += subtree[r];
+        if (bin0) bin0->push_back(r);
+      } else {
+        w1 += subtree[r];
+        if (bin1) bin1->push_back(r);
+      }
+    }
+    return std::max(w0, w1);
+  };
+  std::vector<int> set = roots, top, best_set = roots, best_top;
+  double top_work = 0, best = deal(set, nullptr, nullptr);
+  for (int round = 0; round < 256 && !set.empty(); ++round) {
+    const auto h = std::max_element(set.begin(), set.end(), [&](int a, int b) { return subtree[a] < subtree[b]; });
+    const int r = *h;
+    set.erase(h);
+    top.push_back(r);
+    top_work += work[r];
+    set.insert(set.end(), children[r].begin(), children[r].end());
+    const double cost = top_work + deal(set, nullptr, nullptr);
+    if (cost < best) {
+      best = cost;
+      best_set = set;
+      best_top = top;
+    }
+  }
+  std::vector<int> bins[2];
+  deal(best_set, &bins[0], &bins[1]);
+  owner_.assign(n_, 2);
+  for (int t = 0; t < 2; ++t) {
+    ranges_[t].clear();
+    std::sort(bins[t].begin(), bins[t].end());
+    for (int r : bins[t]) {
+      ranges_[t].push_back({first[r], r + 1});
+      for (int k = super_[first[r]]; k < super_[r + 1]; ++k) owner_[k] = static_cast<signed char>(t);
+    }
+  }
+  // The top part as ranges of consecutive supernodes, in increasing order.
+  std::sort(best_top.begin(), best_top.end());
+  top_ranges_.clear();
+  for (int r : best_top) {
+    if (!top_ranges_.empty() && top_ranges_.back()[1] == r)
+      top_ranges_.back()[1] = r + 1;
+    else
+      top_ranges_.push_back({r, r + 1});
+  }
+}
+
+void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double* x1, std::vector<float>& work) const {
+  const size_t n = static_cast<size_t>(n_), m = static_cast<size_t>(max_rows_);
+  work.assign(4 * n + 4 * m, 0.0f);
+  float* y0 = work.data();
+  float* y1 = y0 + n;
+  float* e0 = y1 + n;  // thread 1's updates of the top part's rows (forward sweep)
+  float* e1 = e0 + n;
+  float* t[2][2] = {{e1 + n, e1 + n + m}, {e1 + n + 2 * m, e1 + n + 3 * m}};
+  for (size_t k = 0; k < n; ++k) {
+    y0[k] = static_cast<float>(b0[perm_[k]]);
+    y1[k] = static_cast<float>(b1[perm_[k]]);
+  }
+  const int* sup = super_.data();
+  run_pair([&](int th) {
+    for (const auto& r : ranges_[th])
+      forward2(r[0], r[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0], t[th][1],
+               owner_.data(), th, th == 1 ? e0 : nullptr, th == 1 ? e1 : nullptr);
+  });
+  for (const auto& r : top_ranges_)
+    for (int k = sup[r[0]]; k < sup[r[1]]; ++k) {
+      y0[k] += e0[k];
+      y1[k] += e1[k];
+    }
+  for (const auto& r : top_ranges_)
+    forward2(r[0], r[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1],
+             owner_.data(), 2, nullptr, nullptr);
+  for (auto r = top_ranges_.rbegin(); r != top_ranges_.rend(); ++r)
+    backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1]);
+  run_pair([&](int th) {
+    for (auto r = ranges_[th].rbegin(); r != ranges_[th].rend(); ++r)
+      backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0],
+                t[th][1]);
+  });
+  for (size_t k = 0; k < n; ++k) {
+    x0[perm_[k]] = y0[k];
+    x1[perm_[k]] = y1[k];
+  }
 }
 
 void FloatFactor::solve(const double* b, double* x, std::vector<float>& work) const {

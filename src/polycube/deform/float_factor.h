@@ -9,6 +9,7 @@
 #pragma once
 #include <cholmod.h>
 
+#include <array>
 #include <vector>
 
 namespace polycube::deform {
@@ -22,12 +23,22 @@ class FloatFactor {
   int size() const { return n_; }
   /// x = A^-1 b with A = P^T L L^T P, in float. `work` is the caller's scratch (one per thread).
   void solve(const double* b, double* x, std::vector<float>& work) const;
+  /// x0 = A^-1 b0 and x1 = A^-1 b1 at once, on two threads when the machine has them: the factor is
+  /// read once for both, each thread sweeping its own subtrees of the elimination tree. The
+  /// arithmetic does not depend on the thread count.
+  void solve2(const double* b0, const double* b1, double* x0, double* x1, std::vector<float>& work) const;
 
  private:
   int n_ = 0, nsuper_ = 0, max_rows_ = 0;
   std::vector<int> super_, pi_, px_, s_, perm_;
   std::vector<float> x_;     // supernode values, column-major, leading dimension = rows of the supernode
   std::vector<float> dinv_;  // inverse diagonal of L
+  // Two-thread split of the elimination tree (see partition()): per thread, ranges [begin, end) of
+  // supernodes (whole subtrees); the top part's ranges; per column, 0 or 1 (a thread's) or 2 (top).
+  std::array<std::vector<std::array<int, 2>>, 2> ranges_;
+  std::vector<std::array<int, 2>> top_ranges_;
+  std::vector<signed char> owner_;
+  void partition();
 };
 
 }  // namespace polycube::deform

@@ -234,7 +234,63 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
                                                 const Eigen::VectorXd& b1, Eigen::VectorXd& x1, double tol,
                                                 int max_iter) const {
   std::array<int, 2> its{};
-  run_pair([&](int k) { its[k] = solve_pcg(k == 0 ? b0 : b1, k == 0 ? x0 : x1, tol, max_iter, k); });
+  if (float_factor_.empty()) {
+    run_pair([&](int k) { its[k] = solve_pcg(k == 0 ? b0 : b1, k == 0 ? x0 : x1, tol, max_iter, k); });
+    return its;
+  }
+  // Both systems in lockstep, so that each preconditioner application serves the two (the float
+  // factor is read once, by two threads over their own subtrees). Per system the iteration is
+  // solve_pcg's.
+  const Eigen::VectorXd* b[2] = {&b0, &b1};
+  Eigen::VectorXd* x[2] = {&x0, &x1};
+  const int n = static_cast<int>(b0.size());
+  x0.resize(n);
+  x1.resize(n);
+  float_factor_.solve2(b0.data(), b1.data(), x0.data(), x1.data(), slots_[0].work);
+  std::array<Eigen::VectorXd, 2> r, z, p, Ap;
+  std::array<double, 2> bn{}, rz{};
+  std::array<bool, 2> active{};
+  run_pair([&](int k) { r[k] = *b[k] - multiply(*x[k]); });
+  for (int k = 0; k < 2; ++k) {
+    bn[k] = b[k]->norm();
+    active[k] = !(bn[k] == 0 || r[k].norm() <= tol * bn[k]);
+    its[k] = active[k] ? -1 : 1;
+    z[k].resize(n);
+  }
+  if (!active[0] && !active[1]) return its;
+  float_factor_.solve2(r[0].data(), r[1].data(), z[0].data(), z[1].data(), slots_[0].work);
+  for (int k = 0; k < 2; ++k) {
+    p[k] = z[k];
+    rz[k] = r[k].dot(z[k]);
+  }
+  for (int it = 1; it <= max_iter && (active[0] || active[1]); ++it) {
+    run_pair([&](int k) {
+      if (active[k]) Ap[k] = multiply(p[k]);
+    });
+    for (int k = 0; k < 2; ++k) {
+      if (!active[k]) continue;
+      const double pAp = p[k].dot(Ap[k]);
+      if (!(pAp > 0)) {
+        active[k] = false;  // its[k] stays -1
+        continue;
+      }
+      const double a = rz[k] / pAp;
+      *x[k] += a * p[k];
+      r[k] -= a * Ap[k];
+      if (r[k].norm() <= tol * bn[k]) {
+        its[k] = it + 1;
+        active[k] = false;
+      }
+    }
+    if (!active[0] && !active[1]) break;
+    float_factor_.solve2(r[0].data(), r[1].data(), z[0].data(), z[1].data(), slots_[0].work);
+    for (int k = 0; k < 2; ++k) {
+      if (!active[k]) continue;
+      const double rz_new = r[k].dot(z[k]);
+      p[k] = z[k] + (rz_new / rz[k]) * p[k];
+      rz[k] = rz_new;
+    }
+  }
   return its;
 }
 

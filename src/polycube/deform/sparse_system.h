@@ -74,8 +74,9 @@ class SparseSystem : public HessianSink {
   /// from the previous iteration's solution was tried: its stale smooth components pass the
   /// residual test, and the SQP stalled on a sphere.)
   int solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter, int slot = 0) const;
-  /// Two independent solve_pcg calls (slots 0 and 1), run on two threads when the machine has
-  /// them (BLAS single-threaded meanwhile). Returns both results.
+  /// Two solve_pcg calls at once. With the float factor they run in lockstep, each preconditioner
+  /// application serving both (FloatFactor::solve2, two threads); otherwise side by side (slots 0
+  /// and 1, BLAS single-threaded meanwhile). Returns both results.
   std::array<int, 2> solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
                                     Eigen::VectorXd& x1, double tol, int max_iter) const;
   /// x0 = A^-1 b0 and x1 = A^-1 b1 with the last factorization, on two threads when available.
