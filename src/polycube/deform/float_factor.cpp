@@ -388,7 +388,16 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
     y1[k] = static_cast<float>(b1[perm_[k]]);
   }
   const int* sup = super_.data();
-  run_pair([&](int th) {
+  // Small factors in one thread (the same arithmetic): a thread costs more than their sweeps.
+  auto both = [&](auto&& f) {
+    if (x_.size() >= parallel_entries_) {
+      run_pair(f);
+    } else {
+      f(0);
+      f(1);
+    }
+  };
+  both([&](int th) {
     for (const auto& r : ranges_[th])
       forward2(r[0], r[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0], t[th][1],
                owner_.data(), th, th == 1 ? e0 : nullptr, th == 1 ? e1 : nullptr);
@@ -403,7 +412,7 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
              owner_.data(), 2, nullptr, nullptr);
   for (auto r = top_ranges_.rbegin(); r != top_ranges_.rend(); ++r)
     backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1]);
-  run_pair([&](int th) {
+  both([&](int th) {
     for (auto r = ranges_[th].rbegin(); r != ranges_[th].rend(); ++r)
       backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0],
                 t[th][1]);

@@ -27,6 +27,12 @@ class FloatFactor {
   /// read once for both, each thread sweeping its own subtrees of the elimination tree. The
   /// arithmetic does not depend on the thread count.
   void solve2(const double* b0, const double* b1, double* x0, double* x1, std::vector<float>& work) const;
+  /// Factors with fewer entries are swept by one thread (torus, 4k tets, 0.3M entries: the threads'
+  /// start-up cost more than the sweeps).
+  static constexpr size_t kParallelEntries = 1000000;
+  size_t entries() const { return x_.size(); }
+  /// Tests: sweep on two threads from this many entries on (kParallelEntries by default).
+  void set_parallel_entries(size_t n) { parallel_entries_ = n; }
 
  private:
   int n_ = 0, nsuper_ = 0, max_rows_ = 0;
@@ -38,6 +44,7 @@ class FloatFactor {
   std::array<std::vector<std::array<int, 2>>, 2> ranges_;
   std::vector<std::array<int, 2>> top_ranges_;
   std::vector<signed char> owner_;
+  size_t parallel_entries_ = kParallelEntries;
   void partition();
 };
 

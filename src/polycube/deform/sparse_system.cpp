@@ -250,7 +250,15 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
   std::array<Eigen::VectorXd, 2> r, z, p, Ap;
   std::array<double, 2> bn{}, rz{};
   std::array<bool, 2> active{};
-  run_pair([&](int k) { r[k] = *b[k] - multiply(*x[k]); });
+  auto both = [&](auto&& f) {  // the two products on two threads only where that pays
+    if (float_factor_.entries() >= FloatFactor::kParallelEntries) {
+      run_pair(f);
+    } else {
+      f(0);
+      f(1);
+    }
+  };
+  both([&](int k) { r[k] = *b[k] - multiply(*x[k]); });
   for (int k = 0; k < 2; ++k) {
     bn[k] = b[k]->norm();
     active[k] = !(bn[k] == 0 || r[k].norm() <= tol * bn[k]);
@@ -264,7 +272,7 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
     rz[k] = r[k].dot(z[k]);
   }
   for (int it = 1; it <= max_iter && (active[0] || active[1]); ++it) {
-    run_pair([&](int k) {
+    both([&](int k) {
       if (active[k]) Ap[k] = multiply(p[k]);
     });
     for (int k = 0; k < 2; ++k) {
