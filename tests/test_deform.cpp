@@ -1,4 +1,5 @@
 // The l1 polycube deformation on shapes with known answers.
+#include <memory>
 #include <random>
 
 #include "polycube/chart/labeling.h"
@@ -20,6 +21,21 @@ double boundary_area(const MatX3d& X, const MatX3i& F) {
   double l1, a;
   deform::l1_measure(X, F, l1, a);
   return a;
+}
+
+// The SQP system over a sphere's tet mesh (tm receives the mesh): ARAP's Gauss-Newton Hessian plus
+// a volume barrier (couples the coordinates), not yet made definite.
+std::unique_ptr<deform::SparseSystem> sphere_system(int subdivisions, int tets, TetMesh& tm) {
+  auto s = sphere(subdivisions);
+  tm = tet_mesh_of(s.V, s.F, tets);
+  std::vector<std::vector<int>> elements;
+  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
+  auto sys = std::make_unique<deform::SparseSystem>(static_cast<int>(tm.V.rows()), elements);
+  sys->cache_elements(elements);
+  const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
+  deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, sys.get());
+  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, sys.get());
+  return sys;
 }
 
 }  // namespace
@@ -88,17 +104,11 @@ TEST(Deform, BestRotationAlignsARotatedBox) {
 // The SQP system: solves on two threads (each with its own CHOLMOD workspace) give what one
 // thread gives, and CG preconditioned by an older factorization reaches its tolerance.
 TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
-  auto s = sphere(2);
-  TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  TetMesh tm;
+  auto system = sphere_system(2, 3000, tm);
+  deform::SparseSystem& sys = *system;
   const int n = static_cast<int>(tm.V.rows());
-  std::vector<std::vector<int>> elements;
-  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
-  deform::SparseSystem sys(n, elements);
-  sys.cache_elements(elements);
   const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
-  // ARAP's Gauss-Newton Hessian plus a volume barrier (couples the coordinates), made definite.
-  deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, &sys);
-  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, &sys);
   sys.add_diagonal(1e-6);
   ASSERT_TRUE(sys.factorize());
   std::mt19937 rng(7);
@@ -133,16 +143,10 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
 // The preconditioner's single-precision copy of a supernodal factor solves the system to float
 // accuracy, CG with it reaches a tight tolerance, and a simplicial factor falls back to CHOLMOD.
 TEST(SparseSystem, FloatPreconditionerMatchesTheDoubleSolve) {
-  auto s = sphere(3);
-  TetMesh tm = tet_mesh_of(s.V, s.F, 8000);
+  TetMesh tm;
+  auto system = sphere_system(3, 8000, tm);
+  deform::SparseSystem& sys = *system;
   const int n = static_cast<int>(tm.V.rows());
-  std::vector<std::vector<int>> elements;
-  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
-  deform::SparseSystem sys(n, elements);
-  sys.cache_elements(elements);
-  const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
-  deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, &sys);
-  deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, &sys);
   sys.add_diagonal(1e-3 * sys.mean_diagonal());
   ASSERT_TRUE(sys.factorize());
   ASSERT_TRUE(sys.factor_ptr()->is_super) << "CHOLMOD chose a simplicial factor: the test needs a larger mesh";
