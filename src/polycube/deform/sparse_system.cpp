@@ -61,10 +61,12 @@ int SparseSystem::position(int vi, int vj, int a, int b) const {
 void SparseSystem::cache_elements(const std::vector<std::vector<int>>& elements) {
   cache_keys_.clear();
   cache_pos_.clear();
+  cache_order_.clear();
   for (const auto& e : elements) {
     if (e.size() != 4) continue;
     std::array<int, 4> k{e[0], e[1], e[2], e[3]};
     cache_keys_.push_back({k, static_cast<int>(cache_pos_.size())});
+    cache_order_.push_back(k);
     for (int p = 0; p < 4; ++p)
       for (int q = 0; q < 4; ++q)
         for (int b = 0; b < 3; ++b)
@@ -73,15 +75,28 @@ void SparseSystem::cache_elements(const std::vector<std::vector<int>>& elements)
   std::sort(cache_keys_.begin(), cache_keys_.end());
 }
 
-void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) { add_to(values_, v, nv, H); }
+void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) {
+  add_to(values_, cursor_, v, nv, H);
+}
 
-void SparseSystem::add_to(std::vector<double>& vals, const int* v, int nv,
+void SparseSystem::add_to(std::vector<double>& vals, int& cursor, const int* v, int nv,
                           const Eigen::Ref<const Eigen::MatrixXd>& H) const {
   if (nv == 4 && !cache_keys_.empty()) {
     const std::array<int, 4> k{v[0], v[1], v[2], v[3]};
-    auto it = std::lower_bound(cache_keys_.begin(), cache_keys_.end(), std::make_pair(k, -1));
-    if (it != cache_keys_.end() && it->first == k) {
-      const int* pos = &cache_pos_[it->second];
+    // The energies add their elements in the order given to cache_elements: try the element after
+    // the last one first, and search the sorted keys only when that is not it (fandisk, 37.8k
+    // tets: a binary search over 57k keys per element was a third of the assembly).
+    constexpr int kStride = 4 * 4 * 3;
+    int offset = -1;
+    if (cursor >= 0 && cursor < static_cast<int>(cache_order_.size()) && cache_order_[cursor] == k) {
+      offset = cursor * kStride;
+    } else {
+      auto it = std::lower_bound(cache_keys_.begin(), cache_keys_.end(), std::make_pair(k, -1));
+      if (it != cache_keys_.end() && it->first == k) offset = it->second;
+    }
+    if (offset >= 0) {
+      cursor = offset / kStride + 1;
+      const int* pos = &cache_pos_[offset];
       for (int p = 0; p < 4; ++p)
         for (int q = 0; q < 4; ++q) {
           if (v[p] > v[q] || (v[p] == v[q] && p != q)) continue;

@@ -40,12 +40,13 @@ class SparseSystem : public HessianSink {
    public:
     Buffer(const SparseSystem& sys, std::vector<double>& values) : sys_(sys), values_(values) {}
     void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override {
-      sys_.add_to(values_, v, nv, H);
+      sys_.add_to(values_, cursor_, v, nv, H);
     }
 
    private:
     const SparseSystem& sys_;
     std::vector<double>& values_;
+    int cursor_ = 0;  // see add_to
   };
   /// Precomputes the value positions of the 4-vertex elements given to the constructor (tets
   /// first), so that add() of those elements skips the index search.
@@ -87,7 +88,9 @@ class SparseSystem : public HessianSink {
 
  private:
   int position(int vi, int vj, int a, int b) const;  // vi <= vj
-  void add_to(std::vector<double>& values, const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) const;
+  // Adds H into `values`; `cursor` is the sink's guess of the next cached element (see add_to).
+  void add_to(std::vector<double>& values, int& cursor, const int* v, int nv,
+              const Eigen::Ref<const Eigen::MatrixXd>& H) const;
   int n_;
   std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
@@ -96,6 +99,8 @@ class SparseSystem : public HessianSink {
   // Cache: for a sorted 4-vertex key, offset into cache_pos_ of its 4x4x3 column-start positions.
   std::vector<std::pair<std::array<int, 4>, int>> cache_keys_;
   std::vector<int> cache_pos_;
+  std::vector<std::array<int, 4>> cache_order_;  // the cached keys in the order given
+  int cursor_ = 0;                                // add()'s guess of the next cached element
   std::unique_ptr<CholmodLLT> llt_;
   // Per slot: CHOLMOD's common (workspace, status) and the solve's reused result and workspaces.
   struct Slot {
