@@ -383,7 +383,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
           break;
         }
       }
-      ++total_iterations;
+      if (!exhausted) ++total_iterations;  // an exhausted search made no step: not an iteration
       t_ls += sw_ls.seconds();
       // Steps cut short by tets about to invert: the volume barrier is too weak for this shape.
       if (inverted_trials >= 3 && p.volume_weight > 0 && p.volume_weight < opt.volume_barrier_max) {

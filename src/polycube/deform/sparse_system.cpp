@@ -227,8 +227,11 @@ int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double
   Eigen::VectorXd r = b - multiply(x);
   const double bn = b.norm();
   if (bn == 0 || r.norm() <= tol * bn) return 1;
+  // Stop also on the preconditioned (energy) norm: r.P^-1 r <= tol^2 b.P^-1 b, where x = P^-1 b.
+  const double bz = b.dot(x);
   Eigen::VectorXd z = precondition(r, slot), p = z;
   double rz = r.dot(z);
+  if (rz <= tol * tol * bz) return 2;
   for (int it = 1; it <= max_iter; ++it) {
     const Eigen::VectorXd Ap = multiply(p);
     const double pAp = p.dot(Ap);
@@ -239,6 +242,7 @@ int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double
     if (r.norm() <= tol * bn) return it + 1;
     z = precondition(r, slot);
     const double rz_new = r.dot(z);
+    if (rz_new <= tol * tol * bz) return it + 2;
     p = z + (rz_new / rz) * p;
     rz = rz_new;
   }
@@ -282,9 +286,15 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
   }
   if (!active[0] && !active[1]) return its;
   float_factor_.solve2(r[0].data(), r[1].data(), z[0].data(), z[1].data(), slots_[0].work);
+  std::array<double, 2> bz{};  // b.P^-1 b, for the energy-norm test as in solve_pcg
   for (int k = 0; k < 2; ++k) {
     p[k] = z[k];
     rz[k] = r[k].dot(z[k]);
+    bz[k] = b[k]->dot(*x[k]);
+    if (active[k] && rz[k] <= tol * tol * bz[k]) {
+      its[k] = 2;
+      active[k] = false;
+    }
   }
   for (int it = 1; it <= max_iter && (active[0] || active[1]); ++it) {
     both([&](int k) {
@@ -310,6 +320,11 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
     for (int k = 0; k < 2; ++k) {
       if (!active[k]) continue;
       const double rz_new = r[k].dot(z[k]);
+      if (rz_new <= tol * tol * bz[k]) {
+        its[k] = it + 2;
+        active[k] = false;
+        continue;
+      }
       p[k] = z[k] + (rz_new / rz[k]) * p[k];
       rz[k] = rz_new;
     }
