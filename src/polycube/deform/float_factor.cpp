@@ -31,32 +31,8 @@ inline __attribute__((always_inline)) v8f load8(const float* p) {
 
 inline __attribute__((always_inline)) void store8(float* p, v8f v) { __builtin_memcpy(p, &v, sizeof v); }
 
-inline __attribute__((always_inline)) void axpy(float* __restrict y, const float* __restrict x, float a, int n) {
-  int i = 0;
-  const v8f va = {a, a, a, a, a, a, a, a};
-  for (; i + 8 <= n; i += 8) store8(y + i, load8(y + i) + va * load8(x + i));
-  for (; i < n; ++i) y[i] += a * x[i];
-}
-
 inline __attribute__((always_inline)) float hsum(v8f a) {
   return ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]));
-}
-
-// Two accumulators of eight lanes (the additions' latency, not the loads, bound one chain).
-inline __attribute__((always_inline)) float dot(const float* __restrict x, const float* __restrict y, int n) {
-  v8f a = {0, 0, 0, 0, 0, 0, 0, 0}, b = a;
-  int i = 0;
-  for (; i + 16 <= n; i += 16) {
-    a += load8(x + i) * load8(y + i);
-    b += load8(x + i + 8) * load8(y + i + 8);
-  }
-  if (i + 8 <= n) {
-    a += load8(x + i) * load8(y + i);
-    i += 8;
-  }
-  float s = 0;
-  for (; i < n; ++i) s += x[i] * y[i];
-  return s + hsum(a + b);
 }
 
 inline __attribute__((always_inline)) void axpy2(float* __restrict y0, float* __restrict y1, const float* __restrict x,
@@ -74,7 +50,8 @@ inline __attribute__((always_inline)) void axpy2(float* __restrict y0, float* __
   }
 }
 
-// dot() of x with y0 and with y1, in the same arithmetic.
+// x dotted with y0 and with y1, two accumulators of eight lanes each (the additions' latency, not
+// the loads, bounds one chain).
 inline __attribute__((always_inline)) void dot2(const float* __restrict x, const float* __restrict y0,
                                                 const float* __restrict y1, int n, float& d0, float& d1) {
   v8f a0 = {0, 0, 0, 0, 0, 0, 0, 0}, b0 = a0, a1 = a0, b1 = a0;
@@ -127,54 +104,12 @@ inline __attribute__((always_inline)) void dot4x2(const float* __restrict x, int
   }
 }
 
-// L y = y (permuted vector), supernode by supernode: the supernode's rows are gathered into t,
-// solved against its dense lower-trapezoidal block column by column, and scattered back.
-POLYCUBE_MULTIVERSION
-void forward(int nsuper, const int* super, const int* pi, const int* px, const int* srows, const float* X,
-             const float* dinv, float* y, float* t) {
-  for (int s = 0; s < nsuper; ++s) {
-    const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi;
-    const float* L = X + px[s];
-    const int* rows = srows + psi;
-    for (int i = 0; i < nscol; ++i) t[i] = y[k1 + i];
-    std::fill(t + nscol, t + nsrow, 0.0f);
-    for (int j = 0; j < nscol; ++j) {
-      const float tj = t[j] * dinv[k1 + j];
-      t[j] = tj;
-      axpy(t + j + 1, L + static_cast<long>(j) * nsrow + j + 1, -tj, nsrow - j - 1);
-    }
-    for (int i = 0; i < nscol; ++i) y[k1 + i] = t[i];
-    for (int i = nscol; i < nsrow; ++i) y[rows[i]] += t[i];
-  }
-}
-
-// L^T y = y, supernodes in reverse order.
-POLYCUBE_MULTIVERSION
-void backward(int nsuper, const int* super, const int* pi, const int* px, const int* srows, const float* X,
-              const float* dinv, float* y, float* t) {
-  for (int s = nsuper - 1; s >= 0; --s) {
-    const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi;
-    const float* L = X + px[s];
-    const int* rows = srows + psi;
-    for (int i = 0; i < nsrow; ++i) t[i] = y[rows[i]];
-    // The rows below the diagonal block first, columns in increasing order (the factor read
-    // forwards, as the prefetchers like: descending columns made this sweep twice the forward's
-    // time), then the triangle of the diagonal block backwards.
-    for (int j = 0; j < nscol; ++j) t[j] -= dot(L + static_cast<long>(j) * nsrow + nscol, t + nscol, nsrow - nscol);
-    for (int j = nscol - 1; j >= 0; --j) {
-      const float* col = L + static_cast<long>(j) * nsrow;
-      t[j] = (t[j] - dot(col + j + 1, t + j + 1, nscol - j - 1)) * dinv[k1 + j];
-    }
-    for (int i = 0; i < nscol; ++i) y[k1 + i] = t[i];
-  }
-}
-
-// The same two sweeps over a range of supernodes, for two right-hand sides at once (the factor is
-// read once for both: the sweeps are bound by memory bandwidth). `owner` gives, per column, the
-// part it belongs to; the forward sweep of part `part` adds its updates of other parts' rows (its
-// ancestors, always in the top part) into `extra` instead of y when extra is given.
+// L y = y (permuted vectors) over a range of supernodes, for two right-hand sides at once (the
+// factor is read once for both: the sweeps are bound by memory bandwidth): each supernode's rows
+// are gathered into t, solved against its dense lower-trapezoidal block column by column, and
+// scattered back. `owner` gives, per column, the part it belongs to; the sweep of part `part` adds
+// its updates of other parts' rows (its ancestors, always in the top part) into `extra` instead of
+// y when extra is given.
 POLYCUBE_MULTIVERSION
 void forward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
               const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1, const signed char* owner,
@@ -213,6 +148,10 @@ void forward2(int s_begin, int s_end, const int* super, const int* pi, const int
   }
 }
 
+// L^T y = y over a range of supernodes in reverse order, two right-hand sides: the rows below each
+// diagonal block first, columns in increasing order, four at a time (the factor read forwards, as
+// the prefetchers like: descending columns made this sweep twice the forward one's time), then the
+// triangle of the diagonal block backwards.
 POLYCUBE_MULTIVERSION
 void backward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
                const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1) {
@@ -227,7 +166,7 @@ void backward2(int s_begin, int s_end, const int* super, const int* pi, const in
     }
     float d0, d1;
     int j = 0;
-    for (; j + 4 <= nscol; j += 4) {  // as in backward(), four columns at a time
+    for (; j + 4 <= nscol; j += 4) {
       float d[8];
       dot4x2(L + static_cast<long>(j) * nsrow + nscol, nsrow, t0 + nscol, t1 + nscol, nsrow - nscol, d);
       for (int c = 0; c < 4; ++c) {
@@ -377,11 +316,12 @@ void FloatFactor::partition() {
 
 void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double* x1, std::vector<float>& work) const {
   const size_t n = static_cast<size_t>(n_), m = static_cast<size_t>(max_rows_);
-  work.assign(4 * n + 4 * m, 0.0f);
+  work.resize(4 * n + 4 * m);
   float* y0 = work.data();
   float* y1 = y0 + n;
   float* e0 = y1 + n;  // thread 1's updates of the top part's rows (forward sweep)
   float* e1 = e0 + n;
+  std::fill(e0, e1 + n, 0.0f);
   float* t[2][2] = {{e1 + n, e1 + n + m}, {e1 + n + 2 * m, e1 + n + 3 * m}};
   for (size_t k = 0; k < n; ++k) {
     y0[k] = static_cast<float>(b0[perm_[k]]);
@@ -390,7 +330,7 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
   const int* sup = super_.data();
   // Small factors in one thread (the same arithmetic): a thread costs more than their sweeps.
   auto both = [&](auto&& f) {
-    if (x_.size() >= parallel_entries_) {
+    if (parallel()) {
       run_pair(f);
     } else {
       f(0);
@@ -424,13 +364,9 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
 }
 
 void FloatFactor::solve(const double* b, double* x, std::vector<float>& work) const {
-  work.resize(static_cast<size_t>(n_) + max_rows_);
-  float* y = work.data();
-  float* t = y + n_;
-  for (int k = 0; k < n_; ++k) y[k] = static_cast<float>(b[perm_[k]]);
-  forward(nsuper_, super_.data(), pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y, t);
-  backward(nsuper_, super_.data(), pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y, t);
-  for (int k = 0; k < n_; ++k) x[perm_[k]] = y[k];
+  // The two-column sweeps with b twice: they read the factor once, as a one-column sweep would.
+  std::vector<double> unused(static_cast<size_t>(n_));
+  solve2(b, b, x, unused.data(), work);
 }
 
 }  // namespace polycube::deform

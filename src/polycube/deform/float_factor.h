@@ -30,7 +30,8 @@ class FloatFactor {
   /// Factors with fewer entries are swept by one thread (torus, 4k tets, 0.3M entries: the threads'
   /// start-up cost more than the sweeps).
   static constexpr size_t kParallelEntries = 1000000;
-  size_t entries() const { return x_.size(); }
+  /// True when solve2 sweeps on two threads (the factor has kParallelEntries or more).
+  bool parallel() const { return x_.size() >= parallel_entries_; }
   /// Tests: sweep on two threads from this many entries on (kParallelEntries by default).
   void set_parallel_entries(size_t n) { parallel_entries_ = n; }
 

@@ -221,73 +221,39 @@ Eigen::VectorXd SparseSystem::multiply(const Eigen::VectorXd& x) const {
   return y;
 }
 
-int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter,
-                            int slot) const {
-  x = precondition(b, slot);
-  Eigen::VectorXd r = b - multiply(x);
-  const double bn = b.norm();
-  if (bn == 0 || r.norm() <= tol * bn) return 1;
-  // Stop also on the preconditioned (energy) norm: r.P^-1 r <= tol^2 b.P^-1 b, where x = P^-1 b.
-  const double bz = b.dot(x);
-  Eigen::VectorXd z = precondition(r, slot), p = z;
-  double rz = r.dot(z);
-  if (rz <= tol * tol * bz) return 2;
-  for (int it = 1; it <= max_iter; ++it) {
-    const Eigen::VectorXd Ap = multiply(p);
-    const double pAp = p.dot(Ap);
-    if (!(pAp > 0)) return -1;
-    const double a = rz / pAp;
-    x += a * p;
-    r -= a * Ap;
-    if (r.norm() <= tol * bn) return it + 1;
-    z = precondition(r, slot);
-    const double rz_new = r.dot(z);
-    if (rz_new <= tol * tol * bz) return it + 2;
-    p = z + (rz_new / rz) * p;
-    rz = rz_new;
-  }
-  return -1;
-}
+namespace {
 
-std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0,
-                                                const Eigen::VectorXd& b1, Eigen::VectorXd& x1, double tol,
-                                                int max_iter) const {
-  std::array<int, 2> its{};
-  if (float_factor_.empty()) {
-    run_pair([&](int k) { its[k] = solve_pcg(k == 0 ? b0 : b1, k == 0 ? x0 : x1, tol, max_iter, k); });
-    return its;
-  }
-  // Both systems in lockstep, so that each preconditioner application serves the two (the float
-  // factor is read once, by two threads over their own subtrees). Per system the iteration is
-  // solve_pcg's.
-  const Eigen::VectorXd* b[2] = {&b0, &b1};
-  Eigen::VectorXd* x[2] = {&x0, &x1};
-  const int n = static_cast<int>(b0.size());
-  x0.resize(n);
-  x1.resize(n);
-  float_factor_.solve2(b0.data(), b1.data(), x0.data(), x1.data(), slots_[0].work);
+// Preconditioned conjugate gradients on `count` (1 or 2) independent systems in lockstep, so that
+// one preconditioner application P(in, out) can serve both. Per system: x = P b; stop when the
+// residual falls below tol relative to b in the 2-norm, or in the preconditioner's energy norm
+// (r.P^-1 r against b.P^-1 b). Returns per system the preconditioner applications used, or -1.
+// `parallel`: the two products with the matrix on two threads.
+template <class Multiply, class Precondition>
+std::array<int, 2> lockstep_pcg(int count, const std::array<const Eigen::VectorXd*, 2>& b,
+                                const std::array<Eigen::VectorXd*, 2>& x, double tol, int max_iter, bool parallel,
+                                Multiply&& multiply, Precondition&& precondition) {
+  std::array<int, 2> its{-1, -1};
   std::array<Eigen::VectorXd, 2> r, z, p, Ap;
-  std::array<double, 2> bn{}, rz{};
+  std::array<double, 2> bn{}, rz{}, bz{};
   std::array<bool, 2> active{};
-  auto both = [&](auto&& f) {  // the two products on two threads only where that pays
-    if (float_factor_.entries() >= FloatFactor::kParallelEntries) {
+  auto each = [&](auto&& f) {
+    if (parallel && count == 2) {
       run_pair(f);
     } else {
-      f(0);
-      f(1);
+      for (int k = 0; k < count; ++k) f(k);
     }
   };
-  both([&](int k) { r[k] = *b[k] - multiply(*x[k]); });
-  for (int k = 0; k < 2; ++k) {
+  precondition(b, x);
+  each([&](int k) { r[k] = *b[k] - multiply(*x[k]); });
+  for (int k = 0; k < count; ++k) {
     bn[k] = b[k]->norm();
     active[k] = !(bn[k] == 0 || r[k].norm() <= tol * bn[k]);
     its[k] = active[k] ? -1 : 1;
-    z[k].resize(n);
+    z[k].resize(r[k].size());
   }
   if (!active[0] && !active[1]) return its;
-  float_factor_.solve2(r[0].data(), r[1].data(), z[0].data(), z[1].data(), slots_[0].work);
-  std::array<double, 2> bz{};  // b.P^-1 b, for the energy-norm test as in solve_pcg
-  for (int k = 0; k < 2; ++k) {
+  precondition({&r[0], &r[1]}, {&z[0], &z[1]});
+  for (int k = 0; k < count; ++k) {
     p[k] = z[k];
     rz[k] = r[k].dot(z[k]);
     bz[k] = b[k]->dot(*x[k]);
@@ -297,10 +263,10 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
     }
   }
   for (int it = 1; it <= max_iter && (active[0] || active[1]); ++it) {
-    both([&](int k) {
+    each([&](int k) {
       if (active[k]) Ap[k] = multiply(p[k]);
     });
-    for (int k = 0; k < 2; ++k) {
+    for (int k = 0; k < count; ++k) {
       if (!active[k]) continue;
       const double pAp = p[k].dot(Ap[k]);
       if (!(pAp > 0)) {
@@ -316,8 +282,8 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
       }
     }
     if (!active[0] && !active[1]) break;
-    float_factor_.solve2(r[0].data(), r[1].data(), z[0].data(), z[1].data(), slots_[0].work);
-    for (int k = 0; k < 2; ++k) {
+    precondition({&r[0], &r[1]}, {&z[0], &z[1]});
+    for (int k = 0; k < count; ++k) {
       if (!active[k]) continue;
       const double rz_new = r[k].dot(z[k]);
       if (rz_new <= tol * tol * bz[k]) {
@@ -330,6 +296,35 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
     }
   }
   return its;
+}
+
+}  // namespace
+
+int SparseSystem::solve_pcg(const Eigen::VectorXd& b, Eigen::VectorXd& x, double tol, int max_iter,
+                            int slot) const {
+  auto mul = [&](const Eigen::VectorXd& v) { return multiply(v); };
+  auto pre = [&](const std::array<const Eigen::VectorXd*, 2>& in, const std::array<Eigen::VectorXd*, 2>& out) {
+    *out[0] = precondition(*in[0], slot);
+  };
+  return lockstep_pcg(1, {&b, nullptr}, {&x, nullptr}, tol, max_iter, false, mul, pre)[0];
+}
+
+std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0,
+                                                const Eigen::VectorXd& b1, Eigen::VectorXd& x1, double tol,
+                                                int max_iter) const {
+  std::array<int, 2> its{};
+  if (float_factor_.empty()) {
+    run_pair([&](int k) { its[k] = solve_pcg(k == 0 ? b0 : b1, k == 0 ? x0 : x1, tol, max_iter, k); });
+    return its;
+  }
+  // Both systems in lockstep, so that each preconditioner application serves the two (the float
+  // factor is read once, by two threads over their own subtrees).
+  auto mul = [&](const Eigen::VectorXd& v) { return multiply(v); };
+  auto pre = [&](const std::array<const Eigen::VectorXd*, 2>& in, const std::array<Eigen::VectorXd*, 2>& out) {
+    for (int k = 0; k < 2; ++k) out[k]->resize(in[k]->size());
+    float_factor_.solve2(in[0]->data(), in[1]->data(), out[0]->data(), out[1]->data(), slots_[0].work);
+  };
+  return lockstep_pcg(2, {&b0, &b1}, {&x0, &x1}, tol, max_iter, float_factor_.parallel(), mul, pre);
 }
 
 void SparseSystem::solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
