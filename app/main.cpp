@@ -145,6 +145,10 @@ int main(int argc, char** argv) {
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "
                  "would invert the tet (1 = off)")
       ->capture_default_str()->check(CLI::Range(1.0, 1e3));
+  bool plain_hessian = false;
+  app.add_flag("--no-lagrangian-hessian", plain_hessian,
+               "Polycube deformation: leave the area constraint's curvature out of the SQP Hessian (slower "
+               "convergence; for comparison)");
   app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
       ->capture_default_str()->check(CLI::Range(1, 100));
   app.add_option("--max-iterations", d.max_inner_iterations, "Polycube deformation: SQP iterations per schedule step at most")
@@ -231,6 +235,7 @@ int main(int argc, char** argv) {
   }
 
   if (no_rotation) opt.deform.global_rotation = false;
+  if (plain_hessian) opt.deform.lagrangian_hessian = false;
   if (no_creases) opt.quad.capture_creases = false;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
   hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;

@@ -114,6 +114,45 @@ TEST(Energies, L1GradientAndHessian) {
   }
 }
 
+// The l1 Hessian with the area constraint's curvature (weight E1 + lambda x area, projected).
+TEST(Energies, L1LagrangianHessian) {
+  Small s = small_mesh();
+  // Exact Hessian of weight E1 + lambda A by finite differences of its gradient.
+  auto lagrangian = [](const MatX3i& F, double eps, double weight, double lambda) -> EnergyFn {
+    return [&F, eps, weight, lambda](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+      const double E = l1_energy(X, F, eps, weight, g, H, true, lambda);
+      Eigen::VectorXd ga = Eigen::VectorXd::Zero(X.size());
+      const double A = area_constraint(X, F, 0.0, g ? &ga : nullptr);
+      if (g) *g += lambda * ga;
+      return E + lambda * A;
+    };
+  };
+  for (double eps : {0.5, 0.05}) {
+    for (double lambda : {-2.0, -0.5, 0.7}) {
+      EnergyFn L = lagrangian(s.F, eps, 1.3, lambda);
+      expect_gradient(L, s.X);
+      expect_psd(hessian(L, s.X));
+    }
+  }
+  // One triangle in the plane z = 0: dE1/dN = (sqrt(1 + eps) + 2 sqrt(eps)) n, so at
+  // lambda = -weight (sqrt(1 + eps) + 2 sqrt(eps)) the second-derivative term of N vanishes and
+  // the N-space Hessian is PSD: nothing is clamped, and the Hessian is the exact one.
+  MatX3d X(3, 3);
+  X << 0, 0, 0, 1.1, 0.2, 0, 0.3, 0.9, 0;
+  MatX3i F(1, 3);
+  F << 0, 1, 2;
+  for (double eps : {0.5, 0.25, 0.05}) {
+    const double weight = 1.3, lambda = -weight * (std::sqrt(1 + eps) + 2 * std::sqrt(eps));
+    EnergyFn L = lagrangian(F, eps, weight, lambda);
+    const Eigen::MatrixXd H = hessian(L, X), Hfd = fd_hessian(L, X);
+    EXPECT_LE((H - Hfd).norm(), 1e-6 * Hfd.norm()) << H << "\n\n" << Hfd;
+    // Without the multiplier the same Hessian is larger (the constraint's curvature is negative).
+    EnergyFn E = [&](const MatX3d& Y, Eigen::VectorXd* g, HessianSink* Hs) { return l1_energy(Y, F, eps, weight, g, Hs); };
+    expect_psd(hessian(E, X) - H);
+    EXPECT_GT((hessian(E, X) - H).norm(), 0.1 * H.norm());
+  }
+}
+
 TEST(Energies, L1OfAxisAlignedBoxIsItsArea) {
   auto b = box(Vec3(0, 0, 0), Vec3(1, 2, 3));
   double l1, area;

@@ -128,7 +128,7 @@ Vec3 area_normal(const MatX3d& X, int a, int b, int c) {
 }
 
 double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad,
-                 HessianSink* hess, bool project) {
+                 HessianSink* hess, bool project, double area_multiplier) {
   double E = 0;
   for (int f = 0; f < F.rows(); ++f) {
     const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
@@ -158,6 +158,32 @@ double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Ei
       // the indefinite C (x) [dg/2]x with C the cyclic 3x3 antisymmetric matrix. Its eigenvalues
       // are +-(sqrt3/2)|dg| (twice each) and 0, and |C (x) S| = (sqrt3/2)|dg| P1 (x) Pw with P1, Pw
       // the projectors orthogonal to (1,1,1) and to dg: the clamped (PSD) part is (H2 + |H2|) / 2.
+      if (area_multiplier != 0 && project) {
+        // With the area constraint's curvature (the Lagrangian's Hessian): per face, the N-space
+        // Hessian weight Hg + lambda (I - n n^T) / |N| projected to PSD (its eigenvalues clamped),
+        // and the second term with the combined gradient d = weight dg + lambda n, clamped as below.
+        const double a = std::sqrt(N2);
+        if (a > 0) {
+          const Vec3 n = N / a;
+          const Vec3 d = weight * dg + area_multiplier * n;
+          Eigen::Matrix3d M = weight * Hg + (area_multiplier / a) * (Eigen::Matrix3d::Identity() - n * n.transpose());
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(M);
+          const Vec3 ev = es.eigenvalues().cwiseMax(0.0);
+          M = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+          Eigen::Matrix<double, 9, 9> H = J.transpose() * M * J;
+          const double w = d.norm();
+          if (w > 0) {
+            const Eigen::Matrix3d P1 = Eigen::Matrix3d::Identity() - Eigen::Matrix3d::Constant(1.0 / 3);
+            const Eigen::Matrix3d Pw = Eigen::Matrix3d::Identity() - d * d.transpose() / (w * w);
+            Eigen::Matrix<double, 9, 9> A;
+            for (int p = 0; p < 3; ++p)
+              for (int q = 0; q < 3; ++q) A.block<3, 3>(3 * p, 3 * q) = P1(p, q) * Pw;
+            H += 0.5 * (normal_second(d) + (std::sqrt(3.0) / 2) * w * A);
+          }
+          hess->add(v, 3, H);
+          continue;
+        }
+      }
       Eigen::Matrix<double, 9, 9> H = J.transpose() * Hg * J;
       const Eigen::Matrix<double, 9, 9> H2 = normal_second(dg);
       if (project) {

@@ -47,8 +47,11 @@ Vec3 area_normal(const MatX3d& X, int a, int b, int c);
 ///   sum_f A_f sum_k sqrt(n_fk^2 + eps) = sum_f sum_k sqrt(N_fk^2 + eps |N_f|^2).
 /// Hessian: per triangle, the second term of Eq. 5 projected to PSD by clamping its eigenvalues
 /// (in closed form); `project` = false gives the exact Hessian, for tests.
+/// area_multiplier lambda != 0 (with project): the Hessian is that of weight E1 + lambda x (total
+/// area), per triangle projected to PSD, i.e. the Lagrangian's Hessian under the area constraint
+/// (energy and gradient unchanged).
 double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad, HessianSink* hess,
-                 bool project = true);
+                 bool project = true, double area_multiplier = 0);
 
 /// Exact (non-smoothed) l1 energy sum_f |N_f|_1 and total area sum_f |N_f|.
 void l1_measure(const MatX3d& X, const MatX3i& F, double& l1, double& area);

@@ -80,14 +80,14 @@ struct Energies {
 
 // The terms on the boundary (total included): l1, anti-foldover barrier, complexity, user edges.
 Energies evaluate_boundary_terms(const Problem& p, const MatX3d& X, double alpha, double eps, Eigen::VectorXd* g,
-                                 HessianSink* H) {
+                                 HessianSink* H, double lambda) {
   Energies e;
   e.barrier = barrier_energy(X, p.B, p.pairs, p.opt.barrier_weight / std::max<size_t>(1, p.pairs.size()), g, H);
   if (!std::isfinite(e.barrier)) {
     e.total = std::numeric_limits<double>::infinity();
     return e;
   }
-  e.e1 = l1_energy(X, p.B, eps, alpha / p.area0, g, H);
+  e.e1 = l1_energy(X, p.B, eps, alpha / p.area0, g, H, true, lambda);
   if (!p.border.empty()) e.e1 += border_l1_energy(X, p.border, p.border_h, eps, alpha / p.area0, g, H);
   if (p.opt.beta > 0) e.complexity = complexity_energy(X, p.B, p.pairs, p.opt.beta, g, H);
   if (!p.opt.edges.empty()) e.edges = edge_energy(X, p.B, p.pairs, p.opt.edges, 1.0, g, H);
@@ -120,7 +120,7 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
 // Measured (fandisk, 37.8k tets): assembly 5.2-5.6 s with only the ARAP gradient on the second
 // thread, 4.0-4.4 s with the volume barrier beside it.
 Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, Eigen::VectorXd* g, HessianSink* H,
-                  bool with_arap_hessian, HessianSink* H_side = nullptr) {
+                  bool with_arap_hessian, HessianSink* H_side = nullptr, double lambda = 0) {
   Eigen::VectorXd gv;
   if (g) gv = Eigen::VectorXd::Zero(g->size());
   Energies eb, ev;
@@ -129,12 +129,12 @@ Energies evaluate(const Problem& p, const MatX3d& X, double alpha, double eps, E
   if (side_by_side) {
     run_pair([&](int k) {
       if (k == 0)
-        eb = evaluate_boundary_terms(p, X, alpha, eps, g, H);
+        eb = evaluate_boundary_terms(p, X, alpha, eps, g, H, lambda);
       else
         ev = evaluate_volume_terms(p, X, g ? &gv : nullptr, H_side, false);
     });
   } else {
-    eb = evaluate_boundary_terms(p, X, alpha, eps, g, H);
+    eb = evaluate_boundary_terms(p, X, alpha, eps, g, H, lambda);
     if (std::isfinite(eb.total)) ev = evaluate_volume_terms(p, X, g ? &gv : nullptr, H, with_arap_hessian);
   }
   Energies e = eb;
@@ -276,6 +276,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   int total_iterations = 0;
+  // The area constraint's multiplier at the last SQP step: its curvature belongs in the SQP
+  // Hessian (the Lagrangian's), see DeformOptions::lagrangian_hessian.
+  double lambda_prev = 0;
   double q = quality(X, l1, p.area0);
   for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
@@ -300,7 +303,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       Eigen::VectorXd g = Eigen::VectorXd::Zero(X.size());
       sys.values() = arap_values;
       std::fill(side_values.begin(), side_values.end(), 0.0);
-      const Energies e0 = evaluate(p, X, alpha, eps, &g, &sys, false, &side);
+      const Energies e0 =
+          evaluate(p, X, alpha, eps, &g, &sys, false, &side, opt.lagrangian_hessian ? lambda_prev : 0.0);
       {
         std::vector<double>& v = sys.values();
         for (size_t k = 0; k < v.size(); ++k) v[k] += side_values[k];
@@ -351,6 +355,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         sys.solve_pair(g, Hg, gc, Hc);
       }
       const double lambda = (-gc.dot(Hg) + C) / gc.dot(Hc);
+      lambda_prev = lambda;
       const Eigen::VectorXd dx = -Hg - lambda * Hc;
       const Eigen::Map<const MatX3d> D(dx.data(), X.rows(), 3);
       t_fac += sw_fac.seconds();
@@ -443,6 +448,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       hooks.debug(os.str());
     }
     alpha *= opt.alpha_factor;
+    lambda_prev *= opt.alpha_factor;  // the multiplier grows with alpha (E1 dominates the gradient)
     eps = std::max(opt.eps_min, eps / opt.eps_factor);
   }
   {

@@ -43,6 +43,13 @@ struct DeformOptions {
   /// one, and a sphere of 2048 triangles folded into 19 charts from 0.05 (6 from 0.01, with a
   /// lower distortion, 0.066 against 0.10).
   double surface_alpha_scale = 0.2;
+  /// SQP with the Hessian of the Lagrangian: the l1 term's Hessian includes lambda x the curvature
+  /// of the total boundary area (lambda the constraint's multiplier at the previous step, times
+  /// alpha_factor after an alpha doubling), projected to PSD per triangle. The area's curvature is
+  /// negative where the l1 term's is positive, so without it the steps are too short and each
+  /// schedule step converges slowly (measured: fandisk 37.8k tets 150 -> 99 SQP iterations, ARAP
+  /// 0.0452 -> 0.0433; 4-5k tets 99-119 -> 74-89).
+  bool lagrangian_hessian = true;
   int max_alpha_steps = 20;     ///< schedule steps (alpha doublings) at most
   int max_inner_iterations = 100;  ///< SQP iterations per schedule step at most
   double target_quality = 1e-3; ///< stop when sum|N|_1 / sum|N|_2 - 1 falls below this
