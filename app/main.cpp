@@ -139,7 +139,8 @@ int main(int argc, char** argv) {
   app.add_option("--barrier-weight", d.barrier_weight, "Polycube deformation: anti-foldover barrier weight (Eq. 11)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--volume-barrier", d.volume_barrier_weight,
-                 "Polycube deformation: weight of the log barrier on tet volumes (0 = off, as in the paper)")
+                 "Polycube deformation: weight of the log barrier on tet volumes, or on triangle areas in surface "
+                 "mode (0 = off, as in the paper)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--volume-boost", d.volume_boost_factor,
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "

@@ -179,6 +179,24 @@ TEST(Energies, ArapGradientHessianAndZeroAtRest) {
   EXPECT_NEAR(E(1.5 * s.X0, nullptr, nullptr), 0.7 * 0.5 * 3 * 0.25, 1e-12);
 }
 
+TEST(Energies, AreaBarrierGradientHessianAndKnownValues) {
+  Small s = small_mesh();
+  SurfaceArapRest rest = SurfaceArapRest::build(s.X0, s.F);
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return area_barrier_energy(X, s.F, rest, 0.3, g, H);
+  };
+  expect_gradient(E, s.X);
+  expect_psd(hessian(E, s.X));
+  EXPECT_NEAR(E(s.X0, nullptr, nullptr), 0, 1e-14);
+  // Uniform scaling by 2 multiplies every area by 4: -0.3 log 4 (the fractions sum to 1).
+  EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), -0.3 * std::log(4.0), 1e-12);
+  // A triangle flattened to a segment: infinite.
+  MatX3d Y = s.X0;
+  const int a = s.F(0, 0), b = s.F(0, 1), c = s.F(0, 2);
+  Y.row(c) = 0.5 * (Y.row(a) + Y.row(b));
+  EXPECT_TRUE(std::isinf(E(Y, nullptr, nullptr)));
+}
+
 TEST(Energies, SurfaceArapGradientHessianAndZeroAtRest) {
   Small s = small_mesh();
   SurfaceArapRest rest = SurfaceArapRest::build(s.X0, s.F);

@@ -252,9 +252,9 @@ TEST_P(RealSurfaceQuads, ReachesAnExactSurfacePolycubeAndValidQuads) {
   nlohmann::json j = surface_quads(path, "real_surface_quads");
   const auto& p = j["polycube"];
   EXPECT_EQ(j["mode"], "surface");
-  // eight's surface deformation stalls at 1.12e-3 (the last schedule steps gain nothing); the
-  // labels are clear enough by then.
-  EXPECT_LT(p["l1_quality"].get<double>(), 2e-3);
+  // The target is reached: eight's surface deformation stalled at 1.1-3.2e-3 before the area
+  // barrier (a triangle degenerated, its normal flipped under every step).
+  EXPECT_LT(p["l1_quality"].get<double>(), 1e-3);
   EXPECT_EQ(p["planarity_error"], 0.0);
   EXPECT_EQ(p["misoriented_faces"], 0);
   EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
@@ -270,17 +270,27 @@ TEST_P(RealSurfaceQuads, ReachesAnExactSurfacePolycubeAndValidQuads) {
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealSurfaceQuads, ::testing::Values("basic/eight.off", "cad/mambo_B3.stl"),
                          test_name);
 
-// cad/joint.obj in surface mode: creases its polycube has no edge along are cut by the quads
-// (Hausdorff 10.2e-3 without the capture); quad edges moved onto them bring it under 9e-3.
-TEST(RealSurfaceQuadsCreases, CreasesOfTheJointAreCaptured) {
-  const std::string path = shared_dir() + "/meshes/cad/joint.obj";
+// cad/fandisk.obj in surface mode at Table I's 724 quads: creases its polycube has no edge along
+// (one fades out inside a face) are cut by the quads (Hausdorff 5.45e-3 without the capture,
+// 2026-11-25); quad edges moved onto them bring it to 4.2e-3. (This test was on cad/joint.obj,
+// whose layout since the Lagrangian Hessian and the area barrier leaves no crease worth a capture:
+// the same 6.55e-3 with or without.)
+TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
+  const std::string path = shared_dir() + "/meshes/cad/fandisk.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  nlohmann::json j = surface_quads(path, "real_surface_creases");
+  PipelineOptions opt;
+  opt.input = path;
+  opt.out_dir = temp_dir("real_surface_creases");
+  opt.surface = true;
+  opt.until = Stage::Quad;
+  opt.target_quads = 724;
+  nlohmann::json j = run_pipeline(opt);
   const auto& q = j["quad"];
   const auto& c = q["creases"];
   EXPECT_EQ(q["inverted"], 0);
   EXPECT_GE(c["captured"].get<int>(), 1) << c.dump();
   EXPECT_LT(c["max_gap_after_rel"].get<double>(), c["max_gap_before_rel"].get<double>()) << c.dump();
-  EXPECT_LT(q["hausdorff_rel"].get<double>(), 9e-3) << q.dump();
+  EXPECT_GT(c["followed_after"].get<double>(), c["followed_before"].get<double>()) << c.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 5e-3) << q.dump();
   EXPECT_GT(q["sj_min"].get<double>(), 0.1) << q.dump();
 }

@@ -298,6 +298,7 @@ SurfaceArapRest SurfaceArapRest::build(const MatX3d& X, const MatX3i& F) {
     r.w[f] = 0.5 * a2;
     total += r.w[f];
   }
+  r.area = r.w;
   for (double& w : r.w) w /= total > 0 ? total : 1.0;
   return r;
 }
@@ -430,6 +431,25 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * wt / J * dJ));
     if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
+  }
+  return weight * E;
+}
+
+double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
+                           Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    if (!(rest.area[f] > 0)) continue;
+    const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
+    const Vec3 xa = row(X, v[0]), xb = row(X, v[1]), xc = row(X, v[2]);
+    const Vec3 N = 0.5 * (xb - xa).cross(xc - xa);
+    const double A = N.norm();
+    if (!(A > 0)) return std::numeric_limits<double>::infinity();
+    E -= rest.w[f] * std::log(A / rest.area[f]);
+    if (!grad && !hess) continue;
+    const Eigen::Matrix<double, 9, 1> dA = normal_jacobian(xa, xb, xc).transpose() * (N / A);
+    if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(-weight * rest.w[f] / A * dA));
+    if (hess) hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * rest.w[f] / (A * A) * dA * dA.transpose()));
   }
   return weight * E;
 }

@@ -84,6 +84,7 @@ struct SurfaceArapRest {
   std::vector<Eigen::Matrix3d> grad;
   std::vector<Vec3> normal;  ///< rest unit normal per triangle
   std::vector<double> w;     ///< rest area / total rest area
+  std::vector<double> area;  ///< rest area
   static SurfaceArapRest build(const MatX3d& X_rest, const MatX3i& F);
 };
 
@@ -97,6 +98,14 @@ struct SurfaceArapRest {
 /// PSD). `per_face` optionally receives each triangle's delta.
 double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
                            Eigen::VectorXd* grad, HessianSink* hess, std::vector<double>* per_face = nullptr);
+
+/// Area barrier of surface mode (not in the paper; the counterpart of volume_barrier_energy):
+/// sum_f w_f * -log(A_f / A_f^rest), w_f the rest area fraction. Keeps every triangle from
+/// degenerating: a triangle whose area reaches ~0 flips its normal under the smallest step, the
+/// anti-foldover barrier of its edges jumps, and every line search fails from there (basic/eight,
+/// a triangle of area 4e-9 where its neighbours had 6e-4). +inf at zero area. Hessian: Gauss-Newton.
+double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
+                           Eigen::VectorXd* grad, HessianSink* hess);
 
 /// sum_k sqrt(v_k^2 + eps |v|^2), the smoothed l1 norm of one vector, with (when asked) its gradient
 /// and Hessian in v: exact, and PSD (each term is the norm of a linear map of v).

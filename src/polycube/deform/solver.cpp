@@ -68,6 +68,7 @@ struct Problem {
   SurfaceArapRest srest;
   std::vector<std::array<int, 2>> border;
   double border_h = 0;  // length weighting the border edges (see border_l1_energy)
+  double area_weight = 0;  // surface mode: weight of the triangle-area barrier (area_barrier_energy)
 
   double distortion(const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) const {
     return surface ? surface_arap_energy(X, B, srest, 1.0, g, H) : arap_energy(X, T, rest, 1.0, g, H);
@@ -101,6 +102,13 @@ Energies evaluate_boundary_terms(const Problem& p, const MatX3d& X, double alpha
 Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorXd* g, HessianSink* H,
                                bool with_arap_hessian) {
   Energies e;
+  if (p.surface && p.area_weight > 0) {
+    e.volume = area_barrier_energy(X, p.B, p.srest, p.area_weight, g, H);
+    if (!std::isfinite(e.volume)) {
+      e.total = std::numeric_limits<double>::infinity();
+      return e;
+    }
+  }
   if (p.volume_weight > 0) {
     e.volume = volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H, p.boost.empty() ? nullptr : &p.boost);
     if (!std::isfinite(e.volume)) {
@@ -235,6 +243,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     p.surface = true;
     p.volume_weight = 0;
     p.srest = SurfaceArapRest::build(X, B);
+    p.area_weight = opt.volume_barrier_weight;
     p.border = border_edges(B);
     if (!p.border.empty()) {
       double len = 0;
@@ -271,7 +280,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   const double arap_diag = sys.mean_diagonal();
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
-  int n_ls = 0, factorizations = 0, cg_iterations = 0;
+  int n_ls = 0, factorizations = 0, cg_iterations = 0, cg_failures = 0, cg_failed_iterations = 0;
   bool factor_valid = false, stalled = false;
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
@@ -331,6 +340,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         solved = i1 > 0 && i2 > 0;
         if (solved) {
           cg_iterations += i1 + i2;
+        } else {
+          ++cg_failures;
+          cg_failed_iterations += (i1 > 0 ? i1 : limit) + (i2 > 0 ? i2 : limit);
         }
       }
       if (!solved) {
@@ -455,7 +467,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     std::ostringstream os;
     os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
        << " s (numeric factorizations " << t_numfac << " s), line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
-       << " factorizations, " << cg_iterations << " preconditioned CG iterations";
+       << " factorizations, " << cg_iterations << " preconditioned CG iterations (and " << cg_failed_iterations
+       << " in " << cg_failures << " solves over the limit)";
     hooks.debug(os.str());
   }
   // Back to input units, centred where the input was.

@@ -24,7 +24,8 @@ struct DeformOptions {
   double beta = 0.0;            ///< weight of the complexity penalty E_eta (Eq. 10); larger = fewer corners
   double barrier_weight = 0.01; ///< weight of the anti-foldover log barrier (Eq. 11), per edge / #edges
   /// Weight of a log barrier on tet volumes (not in the paper): keeps tets from flattening, which
-  /// would otherwise block the line search. 0 disables it.
+  /// would otherwise block the line search. In surface mode, the weight of the same barrier on
+  /// triangle areas (area_barrier_energy). 0 disables it.
   double volume_barrier_weight = 0.1;
   /// The volume-barrier weight is multiplied by 4 whenever tets about to invert cut a line search
   /// short, up to this value.
