@@ -163,6 +163,11 @@ int main(int argc, char** argv) {
                  "keep tets positive), eq17 (the paper's relaxation, then untangling), or auto (both, the lower "
                  "ARAP distortion wins)")
       ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17"}));
+  app.add_option("--eq17-budget", rz.eq17_budget,
+                 "Polycube realization, --realize-start auto: elliptic untangling iterations within which the eq17 "
+                 "start competes with a successful continuation start (beyond: abandoned once the continuation "
+                 "succeeds); -1 = no budget")
+      ->capture_default_str();
   app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
       ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--polycube-map", opt.polycube_map,

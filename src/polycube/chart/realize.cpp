@@ -5,7 +5,9 @@
 #include <Eigen/SVD>
 #include <Eigen/Sparse>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <sstream>
@@ -428,7 +430,8 @@ class Realizer {
     int best = inverted, since_best = 0;
     Eigen::VectorXd best_z = z;
     constexpr int patience = 6;  // rounds without fewer inverted tets before giving up
-    for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience; ++round) {
+    for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience && !(stop_ && stop_(total));
+         ++round) {
       // L-BFGS at this eps. The inverted tets are few and local: a global relative test would stop
       // long before they are repaired, so run until they are gone or the energy stops moving at all.
       double E = 0;
@@ -486,6 +489,9 @@ class Realizer {
                  " tets inverted" + (inverted > 0 && inverted < 4 ? ": " + inverted_tets(X, &shown) : std::string()));
     return sweeps;
   }
+
+  /// The elliptic untangling stops before a round when stop(iterations so far in the call) is true.
+  void set_stop(std::function<bool(int)> stop) { stop_ = std::move(stop); }
 
   // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
   // A Newton step with the barrier's curvature: (K (x) I3 + sum_active b''(J) dJ dJ^T) d = -g over
@@ -643,6 +649,7 @@ class Realizer {
   const Planes& planes_;
   const RealizeOptions& opt_;
   const Hooks& hooks_;
+  std::function<bool(int)> stop_;  // asked before each elliptic round with that call's iterations so far
   deform::ArapRest arap_rest_;
   Reduced red_;
   SpMat K_;
@@ -1074,11 +1081,26 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     std::string failure;
     MatX3d tangled;    ///< failed after untangling: the state it reached
     int inverted = 0;  ///< and its inverted tets
+    bool over_budget = false;  ///< eq17 start: untangled beyond opt.eq17_budget (see RealizeOptions)
   };
+  // Set once the continuation start has succeeded (auto: the eq17 start, over its budget, stops).
+  std::atomic<bool> continuation_succeeded{false};
+  const bool budgeted = starts.size() == 2 && opt.eq17_budget >= 0;
   auto attempt = [&](const std::string& name, Realizer& solver, const Hooks& log) {
     Attempt a;
     MatX3d X = def;
     int ut = 0;
+    int elliptic = 0;  // eq17: elliptic untangling iterations before the current call
+    auto abandoned = [&] { return a.over_budget && continuation_succeeded.load(); };
+    if (name == "eq17" && budgeted)
+      solver.set_stop([&](int it) {
+        a.over_budget = a.over_budget || elliptic + it > opt.eq17_budget;
+        return abandoned();
+      });
+    struct ClearStop {  // the lambda above refers to this call's locals
+      Realizer& s;
+      ~ClearStop() { s.set_stop(nullptr); }
+    } clear_stop{solver};
     if (name == "eq17" || name == "previous") {
       int inverted = 0;
       if (name == "previous") {
@@ -1096,12 +1118,24 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
           return a;
         }
         ut = solver.untangle(X, inverted);
-        if (inverted > 0) ut += solver.untangle_elliptic(X, inverted);
+        if (inverted > 0) {
+          elliptic = solver.untangle_elliptic(X, inverted);
+          ut += elliptic;
+          if (budgeted && elliptic > opt.eq17_budget) a.over_budget = true;
+        }
         // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with
         // them fixed. (Not for the previous start: its few inverted tets are flat, det ~ 0, where
         // the elliptic energy's eps schedule has nothing to work with.)
-        if (inverted > 0) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
-        if (inverted > 0) ut += solver.untangle_local(X, inverted);
+        if (inverted > 0) a.over_budget = true;
+        if (inverted > 0 && !abandoned()) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
+        if (inverted > 0 && !abandoned()) ut += solver.untangle_local(X, inverted);
+        if (abandoned()) {
+          log.debug("realization from the eq17 start: abandoned after " + std::to_string(ut) +
+                    " untangling steps (" + std::to_string(inverted) +
+                    " tets inverted), past its budget, the continuation start having succeeded");
+          a.failure = "the eq17 start was abandoned (the continuation start succeeded)";
+          return a;
+        }
       }
       if (inverted > 0) {
         log.debug("realization from the " + name + " start: " + std::to_string(inverted) +
@@ -1179,6 +1213,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     run_pair([&](int k) {
       if (k == 0) {
         attempts[0] = attempt(starts[0], solver, hooks);
+        if (attempts[0].ok && attempts[0].flipped == 0) continuation_succeeded = true;
       } else {
         Realizer other(rest, T, planes, opt, second);
         if (other.ok())
@@ -1199,6 +1234,12 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     Attempt& a = attempts[i];
     if (!a.failure.empty()) failures += (failures.empty() ? "" : "; ") + a.failure;
     if (!a.ok) continue;
+    // Past its budget, the eq17 start competes only when the continuation failed (whether it got
+    // that far before the continuation finished is a matter of timing).
+    if (a.over_budget && continuation_succeeded.load()) {
+      hooks.debug("realization from the eq17 start: not compared (past its untangling budget)");
+      continue;
+    }
     // A valid candidate (every boundary triangle facing its label) beats any invalid one.
     if (!have || (a.flipped == 0 && have_flipped > 0) || ((a.flipped == 0) == (have_flipped == 0) && a.arap < r.arap)) {
       have = true;
