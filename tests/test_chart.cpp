@@ -310,12 +310,13 @@ TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {
 namespace {
 
 // box_hole (surface edge 0.04) tetrahedralized, deformed and realized from the given start.
-std::pair<TetMesh, chart::PolycubeExtraction> box_hole_realized(const std::string& start) {
+std::pair<TetMesh, chart::PolycubeExtraction> box_hole_realized(const std::string& start, int eq17_budget = 300) {
   MeshData m = examples::make("box_hole", 0.04);
   TetMesh tm = tet_mesh_of(m.V, m.F);
   auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
   chart::ExtractOptions opt;
   opt.realize.start = start;
+  opt.realize.eq17_budget = eq17_budget;
   auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
   return {std::move(tm), std::move(e)};
 }
@@ -330,6 +331,33 @@ TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
   EXPECT_EQ(e.realized.start, "eq17");
   // More steps than the plain ARAP untangling may take: the elliptic untangling ran.
   EXPECT_GT(e.realized.untangle_iterations, chart::RealizeOptions{}.untangle_iterations);
+}
+
+TEST(Realize, Eq17StartPastItsBudgetDoesNotCompeteWithASuccessfulContinuation) {
+  // box_hole's eq17 start needs the elliptic untangling (test above), so with a budget of 0 it is
+  // past it: "auto" must then give the continuation start's result, whichever thread finishes
+  // first, and the same bits on every run. (Alone, a start's factorizations use both BLAS threads,
+  // beside the other one: hence 1e-6, as in the test above.)
+  const auto [tm, cont] = box_hole_realized("continuation");
+  expect_exact_polycube(cont, tm);
+  MatX3d first;
+  for (int run = 0; run < 2; ++run) {
+    const auto [tm2, e] = box_hole_realized("auto", 0);
+    expect_exact_polycube(e, tm2);
+    EXPECT_EQ(e.realized.start, "continuation");
+    EXPECT_NEAR(e.realized.arap, cont.realized.arap, 1e-9 * cont.realized.arap);
+    EXPECT_LE((e.realized.X - cont.realized.X).cwiseAbs().maxCoeff(), 1e-6);
+    if (run == 0)
+      first = e.realized.X;
+    else
+      EXPECT_EQ((e.realized.X - first).cwiseAbs().maxCoeff(), 0.0);
+  }
+  // Without a budget the eq17 start competes again and wins here (lower ARAP), as before.
+  const auto [tm3, eq] = box_hole_realized("eq17");
+  ASSERT_LT(eq.realized.arap, cont.realized.arap);
+  const auto [tm4, any] = box_hole_realized("auto", -1);
+  EXPECT_EQ(any.realized.start, "eq17");
+  EXPECT_NEAR(any.realized.arap, eq.realized.arap, 1e-9 * eq.realized.arap);
 }
 
 TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {
