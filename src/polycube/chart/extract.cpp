@@ -207,7 +207,8 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   std::vector<int> merged(rest.rows(), -1);
   int collapses = 0, collapse_rounds = 0, split_edges = 0;
   auto realize_current = [&](const RealizeOptions& ro) {
-    return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
+    // (Surface mode keeps no copy of the deformed mesh in cur_def: it never collapses tet edges.)
+    return collapses == 0 ? realize_polycube(rest, T, B, T.rows() > 0 ? cur_def : deformed, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
   };
   // Whether row f of CB faces away from its label (or has no area) in the polycube X (diag: X's
