@@ -149,7 +149,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // realization runs on the mesh without the merged vertices; its result is given back in the
   // input's numbering, each merged vertex on its partner.
   // The deformed mesh the retries start from: merged vertices may move (collapse_tet_edge).
-  MatX3d cur_def = T.rows() > 0 ? deformed : MatX3d();
+  MatX3d cur_def = deformed;
   // The rest mesh the retries use: a kept vertex may move to the collapsed edge's midpoint.
   MatX3d cur_rest = T.rows() > 0 ? rest : MatX3d();
   auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
@@ -207,8 +207,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   std::vector<int> merged(rest.rows(), -1);
   int collapses = 0, collapse_rounds = 0, split_edges = 0;
   auto realize_current = [&](const RealizeOptions& ro) {
-    // (Surface mode keeps no copy of the deformed mesh in cur_def: it never collapses tet edges.)
-    return collapses == 0 ? realize_polycube(rest, T, B, T.rows() > 0 ? cur_def : deformed, CL, ro, hooks)
+    return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
   };
   // Whether row f of CB faces away from its label (or has no area) in the polycube X (diag: X's

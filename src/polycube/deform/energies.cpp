@@ -60,6 +60,21 @@ inline Eigen::Matrix<double, 9, 9> normal_second(const Vec3& w) {
   return H;
 }
 
+// The PSD part (H2 + |H2|) / 2 of H2 = normal_second(w): H2 is C (x) [w/2]x with C the cyclic 3x3
+// antisymmetric matrix, eigenvalues +-(sqrt3/2)|w| (twice each) and 0, and |H2| = (sqrt3/2)|w|
+// P1 (x) Pw with P1, Pw the projectors orthogonal to (1,1,1) and to w.
+inline Eigen::Matrix<double, 9, 9> clamped_normal_second(const Vec3& w) {
+  const Eigen::Matrix<double, 9, 9> H2 = normal_second(w);
+  const double len = w.norm();
+  if (!(len > 0)) return H2;
+  const Eigen::Matrix3d P1 = Eigen::Matrix3d::Identity() - Eigen::Matrix3d::Constant(1.0 / 3);
+  const Eigen::Matrix3d Pw = Eigen::Matrix3d::Identity() - w * w.transpose() / (len * len);
+  Eigen::Matrix<double, 9, 9> A;
+  for (int p = 0; p < 3; ++p)
+    for (int q = 0; q < 3; ++q) A.block<3, 3>(3 * p, 3 * q) = P1(p, q) * Pw;
+  return 0.5 * (H2 + (std::sqrt(3.0) / 2) * len * A);
+}
+
 inline Vec3 row(const MatX3d& X, int i) { return X.row(i).transpose(); }
 
 // Rotation part of the polar decomposition of F (closest rotation, never a reflection). Closed-form
@@ -154,52 +169,28 @@ double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Ei
     const Eigen::Matrix<double, 3, 9> J = normal_jacobian(xa, xb, xc);
     if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(weight * J.transpose() * dg));
     if (hess) {
-      // Eq. 5: the first term J^T Hg J is PSD (g is convex in N); the second, sum_k dg_k d2N_k, is
-      // the indefinite C (x) [dg/2]x with C the cyclic 3x3 antisymmetric matrix. Its eigenvalues
-      // are +-(sqrt3/2)|dg| (twice each) and 0, and |C (x) S| = (sqrt3/2)|dg| P1 (x) Pw with P1, Pw
-      // the projectors orthogonal to (1,1,1) and to dg: the clamped (PSD) part is (H2 + |H2|) / 2.
-      if (area_multiplier != 0 && project) {
-        // With the area constraint's curvature (the Lagrangian's Hessian): per face, the N-space
-        // Hessian weight Hg + lambda (I - n n^T) / |N| projected to PSD (its eigenvalues clamped),
-        // and the second term with the combined gradient d = weight dg + lambda n, clamped as below.
-        const double a = std::sqrt(N2);
-        if (a > 0) {
-          const Vec3 n = N / a;
-          const Vec3 d = weight * dg + area_multiplier * n;
-          Eigen::Matrix3d M = weight * Hg + (area_multiplier / a) * (Eigen::Matrix3d::Identity() - n * n.transpose());
-          Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(M);
-          const Vec3 ev = es.eigenvalues().cwiseMax(0.0);
-          M = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
-          Eigen::Matrix<double, 9, 9> H = J.transpose() * M * J;
-          const double w = d.norm();
-          if (w > 0) {
-            const Eigen::Matrix3d P1 = Eigen::Matrix3d::Identity() - Eigen::Matrix3d::Constant(1.0 / 3);
-            const Eigen::Matrix3d Pw = Eigen::Matrix3d::Identity() - d * d.transpose() / (w * w);
-            Eigen::Matrix<double, 9, 9> A;
-            for (int p = 0; p < 3; ++p)
-              for (int q = 0; q < 3; ++q) A.block<3, 3>(3 * p, 3 * q) = P1(p, q) * Pw;
-            H += 0.5 * (normal_second(d) + (std::sqrt(3.0) / 2) * w * A);
-          }
-          hess->add(v, 3, H);
-          continue;
-        }
+      // Eq. 5: the first term J^T Hg J is PSD (g is convex in N); the second, sum_k dg_k d2N_k =
+      // normal_second(dg), is indefinite and clamped to its PSD part (clamped_normal_second).
+      // H = scale (J^T M J + second term of d): without the multiplier M = Hg, d = dg, scale = weight.
+      Eigen::Matrix3d M = Hg;
+      Vec3 d = dg;
+      double scale = weight;
+      const double a = std::sqrt(N2);
+      if (area_multiplier != 0 && project && a > 0) {
+        // With the area constraint's curvature (the Lagrangian's Hessian): the N-space Hessian
+        // weight Hg + lambda (I - n n^T) / |N| projected to PSD (its eigenvalues clamped), and the
+        // second term of the combined gradient d = weight dg + lambda n, clamped like dg's.
+        const Vec3 n = N / a;
+        d = weight * dg + area_multiplier * n;
+        M = weight * Hg + (area_multiplier / a) * (Eigen::Matrix3d::Identity() - n * n.transpose());
+        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(M);
+        const Vec3 ev = es.eigenvalues().cwiseMax(0.0);
+        M = es.eigenvectors() * ev.asDiagonal() * es.eigenvectors().transpose();
+        scale = 1.0;
       }
-      Eigen::Matrix<double, 9, 9> H = J.transpose() * Hg * J;
-      const Eigen::Matrix<double, 9, 9> H2 = normal_second(dg);
-      if (project) {
-        const double w = dg.norm();
-        if (w > 0) {
-          const Eigen::Matrix3d P1 = Eigen::Matrix3d::Identity() - Eigen::Matrix3d::Constant(1.0 / 3);
-          const Eigen::Matrix3d Pw = Eigen::Matrix3d::Identity() - dg * dg.transpose() / (w * w);
-          Eigen::Matrix<double, 9, 9> A;
-          for (int p = 0; p < 3; ++p)
-            for (int q = 0; q < 3; ++q) A.block<3, 3>(3 * p, 3 * q) = P1(p, q) * Pw;
-          H += 0.5 * (H2 + (std::sqrt(3.0) / 2) * w * A);
-        }
-      } else {
-        H += H2;
-      }
-      hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * H));
+      Eigen::Matrix<double, 9, 9> H = J.transpose() * M * J;
+      H += project ? clamped_normal_second(d) : normal_second(d);
+      hess->add(v, 3, Eigen::Matrix<double, 9, 9>(scale * H));
     }
   }
   return weight * E;
