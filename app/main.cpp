@@ -168,6 +168,14 @@ int main(int argc, char** argv) {
                  "start competes with a successful continuation start (beyond: abandoned once the continuation "
                  "succeeds); -1 = no budget")
       ->capture_default_str();
+  app.add_option("--untangle-patience", rz.untangle_patience,
+                 "Polycube realization: elliptic untangling rounds in a row without fewer inverted tets before it "
+                 "gives up (the edge collapses and relabellings take over)")
+      ->capture_default_str()->check(CLI::Range(1, 1000));
+  app.add_option("--continuation-retries", rz.continuation_retries,
+                 "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "
+                 "(each) before landing on the planes and untangling")
+      ->capture_default_str()->check(CLI::Range(0, 6));
   app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
       ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--polycube-map", opt.polycube_map,

@@ -236,6 +236,21 @@ TEST(Cli, CollapsedRatioOption) {
   EXPECT_EQ(run_cli("--example box_hole --until polycube --collapsed-ratio 0.6 -q -o " + out).code, 2);
 }
 
+TEST(Cli, RealizationOptionsReachTheReport) {
+  // The realization's options are reported (for reproducing a run); out of range: exit 2.
+  std::string out = temp_dir("realize_options");
+  RunResult r = run_cli("--example box_hole --until polycube --untangle-patience 3 --continuation-retries 1 -q -o " +
+                        out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["polycube"]["realize_options"]["untangle_patience"].get<int>(), 3);
+  EXPECT_EQ(j["polycube"]["realize_options"]["continuation_retries"].get<int>(), 1);
+  EXPECT_EQ(j["polycube"]["realize_options"]["start"].get<std::string>(), "auto");
+  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --untangle-patience 0 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
+}
+
 namespace {
 // Boundary faces of a polycube tet mesh read back: each has one coordinate along its label's axis.
 double planarity_spread(const MeshData& m, const std::vector<int>& labels) {

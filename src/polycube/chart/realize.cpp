@@ -429,7 +429,7 @@ class Realizer {
     inverted = count_inverted(X, T_, arap_rest_);
     int best = inverted, since_best = 0;
     Eigen::VectorXd best_z = z;
-    constexpr int patience = 6;  // rounds without fewer inverted tets before giving up
+    const int patience = std::max(1, opt_.untangle_patience);
     for (int round = 0; round < max_rounds && inverted > 0 && since_best < patience && !(stop_ && stop_(total));
          ++round) {
       // L-BFGS at this eps. The inverted tets are few and local: a global relative test would stop
@@ -1156,10 +1156,12 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         return a;
       }
       solver.set_barrier_scale(X);
-      // Where the continuation stalls on nearly flat tets, a stronger barrier keeps them open:
-      // retried with the barrier weight x10, x100.
+      // Where the continuation stalls on nearly flat tets, a stronger barrier may keep them open:
+      // retried with the barrier weight x10, x100, ... (opt.continuation_retries times).
       bool landed = false;
-      for (double f = 1; f <= 100 && !landed; f *= 10) {
+      double f_max = 1;
+      for (int k = 0; k < opt.continuation_retries; ++k) f_max *= 10;
+      for (double f = 1; f <= f_max && !landed; f *= 10) {
         X = def;
         solver.set_barrier_weight(f * opt.barrier_weight);
         int steps = 0;

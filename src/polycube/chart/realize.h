@@ -9,8 +9,8 @@
 //   1. start, either
 //      "continuation": from the deformed mesh (no tet inverted), the constrained coordinates travel
 //      to their plane heights (mean of the plane's deformed coordinates) in steps that keep every
-//      tet positive, the other coordinates following by the ARAP response and relaxing (retried
-//      with the barrier 10x and 100x stronger when nearly flat tets stall it: rod, fandisk);
+//      tet positive, the other coordinates following by the ARAP response and relaxing (optionally
+//      retried with a stronger barrier when nearly flat tets stall it, see continuation_retries);
 //      "eq17": the valence-weighted relaxation of Eq. 17 with the same heights (a sparse
 //      least-squares solve per axis), then plain ARAP local/global steps while tets are inverted;
 //      either start, if tets are still inverted (the continuation landed by force, or ARAP steps
@@ -57,6 +57,19 @@ struct RealizeOptions {
   /// (rod, 68k tets: 4277 untangling steps, ~120 s, 18 tets still inverted, beside a continuation
   /// that succeeded in 17 s). Negative: no budget (it always competes, as before).
   int eq17_budget = 300;
+  /// Elliptic untangling: rounds (eps updates) in a row without fewer inverted tets before a call
+  /// gives up and returns its best round. On the 20 realized shared meshes (--tets 20000) every
+  /// call that untangled all tets improved at every round but at most one; the calls that went on
+  /// after two rounds without progress never untangled all (fandisk 37.8k tets: 2 then 1 tets
+  /// for 6 rounds each, ~25 s per start, before the edge collapse that realizes it).
+  int untangle_patience = 2;
+  /// Continuation start: when it stalls (a tet about to invert), retries from the deformed mesh
+  /// with the barrier weight x10, x100, ... this many times before landing on the planes and
+  /// untangling. Added when nothing came after the landing; now the untangling, the edge collapses
+  /// and the relabellings do, and on the shared meshes no retry has landed since (fandisk 37.8k
+  /// tets stalled at t = 0.99939, 0.99963, 0.949, 41 s for the three; spot 0.93, 0.80, 0.79;
+  /// bumpy torus 0.991, 0.990): none by default.
+  int continuation_retries = 0;
   /// Barrier weight (relative to ARAP) on tets whose volume ratio J = det(F) falls below
   /// tau = barrier_threshold x (median J): weight (log(J / tau))^2 below tau, 0 above. ARAP alone
   /// lets tets flatten where charts meet (box_hole: max isometric distortion 59 with 0.01 / 0.05,

@@ -524,6 +524,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
                        {"relabelled_faces", ex.cleanup.relabelled_faces},
                        {"collapsed_ratio", opt.polycube.collapsed_ratio}};
+      pj["realize_options"] = {{"start", opt.polycube.realize.start},
+                               {"eq17_budget", opt.polycube.realize.eq17_budget},
+                               {"untangle_patience", opt.polycube.realize.untangle_patience},
+                               {"continuation_retries", opt.polycube.realize.continuation_retries}};
       if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
         // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
         // axes (a polycube edge), a flat one when they share the label.
