@@ -724,6 +724,57 @@ TEST(Chart, CollapseTetEdgeRefusedAtRestEverywhereOnTheEdgeMayTangleForTheCaller
   }
 }
 
+TEST(Realize, NearlyFlatTetsOfAValidMapAreOpened) {
+  // An interior vertex of a box's tet mesh moved to 1e-6 of the way from a face of its star: that
+  // tet is nearly flat but positive. The local sweeps with flat = 1e-3 open it (volume ratio above
+  // 1e-3 of the mean), turn no tet over and leave the fixed boundary where it was.
+  auto b = grid_box(3);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  const int n = static_cast<int>(tm.V.rows());
+  std::array<std::vector<char>, 3> fixed;
+  for (auto& f : fixed) f.assign(n, 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int j = 0; j < 3; ++j)
+      for (auto& x : fixed) x[tm.boundary(f, j)] = 1;
+  int v = -1;
+  for (int i = 0; i < n && v < 0; ++i)
+    if (!fixed[0][i]) v = i;
+  ASSERT_GE(v, 0) << "no interior vertex";
+  const deform::ArapRest reference = deform::ArapRest::build(tm.V, tm.T);
+  auto min_ratio = [&](const MatX3d& X) {
+    double m = std::numeric_limits<double>::infinity();
+    for (int t = 0; t < tm.T.rows(); ++t) {
+      Eigen::Matrix3d Ds;
+      for (int k = 0; k < 3; ++k) Ds.col(k) = (X.row(tm.T(t, k + 1)) - X.row(tm.T(t, 0))).transpose();
+      m = std::min(m, (Ds * reference.Dm_inv[t]).determinant());
+    }
+    return m;
+  };
+  MatX3d X = tm.V;
+  for (int t = 0; t < tm.T.rows(); ++t) {
+    int at = -1;
+    for (int j = 0; j < 4; ++j)
+      if (tm.T(t, j) == v) at = j;
+    if (at < 0) continue;
+    Eigen::RowVector3d c = Eigen::RowVector3d::Zero();
+    for (int j = 0; j < 4; ++j)
+      if (j != at) c += tm.V.row(tm.T(t, j)) / 3.0;
+    X.row(v) = c + 1e-6 * (tm.V.row(v) - c);
+    break;
+  }
+  ASSERT_EQ(measure_tets(X, tm.T).inverted, 0);
+  ASSERT_LT(min_ratio(X), 1e-5);
+  int left = -1;
+  chart::untangle_tets_locally(reference, tm.T, fixed, X, left, 3, 30, 1e-3);
+  EXPECT_EQ(left, 0);
+  EXPECT_EQ(measure_tets(X, tm.T).inverted, 0);
+  EXPECT_GT(min_ratio(X), 1e-3);
+  for (int i = 0; i < n; ++i)
+    if (fixed[0][i]) {
+      EXPECT_EQ((X.row(i) - tm.V.row(i)).norm(), 0.0) << "boundary vertex " << i << " moved";
+    }
+}
+
 TEST(Realize, LocalUntanglingWithAPerTetReferenceKeepsTheBoundary) {
   // The rest mesh's repair after such a collapse: each tet's reference is its own shape before
   // (a soup of tets), the boundary vertices fixed, the interior ones free. An interior vertex of

@@ -19,7 +19,9 @@
 //      preconditioned with the ARAP matrix, planes kept exact (fandisk: 243 inverted -> 0), stopped
 //      if the mesh shrinks as a whole (volume halved: free heights let it) and returning its best
 //      round, then again with the plane heights fixed, then locally (untangle_tets_locally);
-//   2. ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
+//   2. nearly flat tets (volume ratio under 1e-3 of the mean) opened by local sweeps (the local
+//      untangling's Newton steps, kept while the smallest volume ratio grows), then
+//      ARAP minimization (heights free) by Newton steps with the constant ARAP Hessian, with a line
 //      search that keeps every tet positive, and a barrier that only acts on nearly flat tets; when
 //      a step comes out short, the next one also uses the barrier's Gauss-Newton Hessian (all axes
 //      coupled, one factorization): on cad/block this cut the time from 153 s to 8 s and the worst
@@ -161,9 +163,13 @@ int untangle_tets_locally(const MatX3d& rest, const MatX4i& T, const std::array<
                           int& inverted, int rings = 3, int max_sweeps = 300);
 /// The same with the reference shape given per tet (deform::ArapRest of any positive tets, e.g.
 /// each tet's shape before an edge collapse moved one of its vertices).
+/// flat > 0: the tets repaired are those whose volume ratio (to the reference) is under flat x the
+/// mean one (nearly flat or inverted; `inverted` receives how many are left), and a sweep is kept
+/// only while it raises the smallest volume ratio and turns no tet over: opening the nearly flat tets of a valid
+/// map (the realization does so before its ARAP steps, with flat = 1e-3).
 int untangle_tets_locally(const deform::ArapRest& reference, const MatX4i& T,
                           const std::array<std::vector<char>, 3>& fixed, MatX3d& X, int& inverted, int rings = 3,
-                          int max_sweeps = 300);
+                          int max_sweeps = 300, double flat = 0);
 
 /// Isometric distortion statistics of the map rest -> X over tets T.
 Distortion isometric_distortion(const MatX3d& rest, const MatX3d& X, const MatX4i& T);
