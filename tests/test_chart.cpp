@@ -724,6 +724,23 @@ TEST(Chart, CollapseTetEdgeRefusedAtRestEverywhereOnTheEdgeMayTangleForTheCaller
   }
 }
 
+namespace {
+// Local untangling tests: every axis of the boundary vertices fixed, and the first vertex that is not.
+std::array<std::vector<char>, 3> boundary_fixed(const TetMesh& tm) {
+  std::array<std::vector<char>, 3> fixed;
+  for (auto& f : fixed) f.assign(tm.V.rows(), 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int j = 0; j < 3; ++j)
+      for (auto& x : fixed) x[tm.boundary(f, j)] = 1;
+  return fixed;
+}
+int first_interior(const std::array<std::vector<char>, 3>& fixed) {
+  for (size_t i = 0; i < fixed[0].size(); ++i)
+    if (!fixed[0][i]) return static_cast<int>(i);
+  return -1;
+}
+}  // namespace
+
 TEST(Realize, NearlyFlatTetsOfAValidMapAreOpened) {
   // An interior vertex of a box's tet mesh moved to 1e-6 of the way from a face of its star: that
   // tet is nearly flat but positive. The local sweeps with flat = 1e-3 open it (volume ratio above
@@ -731,14 +748,8 @@ TEST(Realize, NearlyFlatTetsOfAValidMapAreOpened) {
   auto b = grid_box(3);
   TetMesh tm = tet_mesh_of(b.V, b.F);
   const int n = static_cast<int>(tm.V.rows());
-  std::array<std::vector<char>, 3> fixed;
-  for (auto& f : fixed) f.assign(n, 0);
-  for (int f = 0; f < tm.boundary.rows(); ++f)
-    for (int j = 0; j < 3; ++j)
-      for (auto& x : fixed) x[tm.boundary(f, j)] = 1;
-  int v = -1;
-  for (int i = 0; i < n && v < 0; ++i)
-    if (!fixed[0][i]) v = i;
+  const auto fixed = boundary_fixed(tm);
+  const int v = first_interior(fixed);
   ASSERT_GE(v, 0) << "no interior vertex";
   const deform::ArapRest reference = deform::ArapRest::build(tm.V, tm.T);
   auto min_ratio = [&](const MatX3d& X) {
@@ -787,14 +798,8 @@ TEST(Realize, LocalUntanglingWithAPerTetReferenceKeepsTheBoundary) {
   for (int t = 0; t < tm.T.rows(); ++t)
     for (int j = 0; j < 4; ++j) soup.row(4 * t + j) = tm.V.row(tm.T(t, j)), ST(t, j) = 4 * t + j;
   const deform::ArapRest reference = deform::ArapRest::build(soup, ST);
-  std::array<std::vector<char>, 3> fixed;
-  for (auto& f : fixed) f.assign(n, 0);
-  for (int f = 0; f < tm.boundary.rows(); ++f)
-    for (int j = 0; j < 3; ++j)
-      for (auto& x : fixed) x[tm.boundary(f, j)] = 1;
-  int v = -1;
-  for (int i = 0; i < n && v < 0; ++i)
-    if (!fixed[0][i]) v = i;
+  const auto fixed = boundary_fixed(tm);
+  const int v = first_interior(fixed);
   ASSERT_GE(v, 0) << "no interior vertex";
   MatX3d X = tm.V;
   push_through_star(tm.T, v, 0.5, X);

@@ -92,22 +92,28 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
   constexpr double theta = 0.5;
   const double bad_below = flat * s * s * s;
   auto bad = [&](int t) { return !(volume_ratio(X, T_, arap_rest_, t) > bad_below); };
-  auto count_bad = [&] {
-    int c = 0;
-    for (int t = 0; t < nt; ++t) c += bad(t);
-    return c;
+  // One pass over the tets: those to repair, those inverted, the smallest volume ratio.
+  struct Scan {
+    int bad = 0, inverted = 0;
+    double min = std::numeric_limits<double>::infinity();
   };
-  auto min_ratio = [&] {
-    double m = std::numeric_limits<double>::infinity();
-    for (int t = 0; t < nt; ++t) m = std::min(m, volume_ratio(X, T_, arap_rest_, t));
-    return m;
+  auto scan = [&] {
+    Scan r;
+    for (int t = 0; t < nt; ++t) {
+      const double J = volume_ratio(X, T_, arap_rest_, t);
+      r.bad += !(J > bad_below);
+      r.inverted += !(J > 0);
+      r.min = std::min(r.min, J);
+    }
+    return r;
   };
-  inverted = count_bad();
+  Scan now = scan();
+  inverted = now.bad;
   int sweep = 0, best = inverted, since_best = 0;
-  MatX3d kept;  // flat > 0: the state before the sweep...
-  double kept_min = flat > 0 ? min_ratio() : 0;  // ...and its smallest volume ratio
+  MatX3d kept;  // flat > 0: the state before the sweep, whose scan is `before`
+  Scan before;
   for (; sweep < max_sweeps && inverted > 0 && since_best < 30; ++sweep) {
-    if (flat > 0) kept = X;
+    if (flat > 0) kept = X, before = now;
     // The region: vertices within `rings` of a tet to repair, found again every sweep (a sweep
     // is 10 passes over it).
     std::vector<char> in(n, 0);
@@ -201,18 +207,16 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
           }
         }
       }
-    inverted = count_bad();
+    now = scan();
+    inverted = now.bad;
     if (flat > 0) {
       // Kept while the smallest volume ratio grows and no tet turns over; otherwise back, and stop.
-      const double m = min_ratio();
-      if (!(m > kept_min) || count_inverted(X, T_, arap_rest_) > 0) {
+      if (!(now.min > before.min) || now.inverted > 0) {
         X = kept;
-        inverted = best;
+        inverted = before.bad;
         ++sweep;
         break;
       }
-      kept_min = m;
-      best = inverted;
       continue;
     }
     if (inverted < best) best = inverted, since_best = 0;
@@ -1219,9 +1223,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       // Where the continuation stalls on nearly flat tets, a stronger barrier may keep them open:
       // retried with the barrier weight x10, x100, ... (opt.continuation_retries times).
       bool landed = false;
-      double f_max = 1;
-      for (int k = 0; k < opt.continuation_retries; ++k) f_max *= 10;
-      for (double f = 1; f <= f_max && !landed; f *= 10) {
+      double f = 1;
+      for (int k = 0; k <= opt.continuation_retries && !landed; ++k, f *= 10) {
         X = def;
         solver.set_barrier_weight(f * opt.barrier_weight);
         int steps = 0;
