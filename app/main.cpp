@@ -160,9 +160,9 @@ int main(int argc, char** argv) {
   auto& rz = opt.polycube.realize;
   app.add_option("--realize-start", rz.start,
                  "Polycube realization start: continuation (the deformed mesh moved onto the planes in steps that "
-                 "keep tets positive), eq17 (the paper's relaxation, then untangling), or auto (both, the lower "
-                 "ARAP distortion wins)")
-      ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17"}));
+                 "keep tets positive), eq17 (the paper's relaxation, then untangling), auto (both, the lower "
+                 "ARAP distortion wins) or penalty (the penalty path alone, see --no-penalty-path)")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17", "penalty"}));
   app.add_option("--eq17-budget", rz.eq17_budget,
                  "Polycube realization, --realize-start auto: elliptic untangling iterations within which the eq17 "
                  "start competes with a successful continuation start (beyond: abandoned once the continuation "
@@ -176,6 +176,10 @@ int main(int argc, char** argv) {
                  "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "
                  "(each) before landing on the planes and untangling")
       ->capture_default_str()->check(CLI::Range(0, 6));
+  app.add_flag("!--no-penalty-path", rz.penalty_path,
+               "Polycube realization: when the continuation start stalls, land on the planes by force at once "
+               "instead of first trying the penalty path (plane heights free, gaps penalized ever more strongly, "
+               "every tet kept positive)");
   app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
       ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--polycube-map", opt.polycube_map,

@@ -333,6 +333,48 @@ TEST(Realize, Eq17StartIsUntangledOnBoxWithThroughHole) {
   EXPECT_GT(e.realized.untangle_iterations, chart::RealizeOptions{}.untangle_iterations);
 }
 
+TEST(Realize, PenaltyStartRealizesBoxWithThroughHoleLikeTheContinuation) {
+  // The penalty path alone (plane heights free, gaps penalized ever more strongly): an exact,
+  // valid polycube whose ARAP distortion is close to the continuation start's.
+  MeshData m = examples::make("box_hole", 0.06);
+  TetMesh tm = tet_mesh_of(m.V, m.F);
+  const auto d = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  chart::ExtractOptions opt;
+  opt.realize.start = "penalty";
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.realized.start, "penalty");
+  EXPECT_GT(e.realized.untangle_iterations, 0);  // its Newton steps
+  opt.realize.start = "continuation";
+  const auto c = chart::extract_polycube(tm.V, tm.T, tm.boundary, d.X, opt);
+  expect_exact_polycube(c, tm);
+  EXPECT_EQ(e.charts.corners, c.charts.corners);
+  EXPECT_LT(e.realized.arap, 1.05 * c.realized.arap);
+}
+
+TEST(Realize, PenaltyStartFindsTheHeightsOfAStronglyPerturbedBox) {
+  // Every vertex moved by up to 2.5% of the smallest side: the heights are unknowns of the path,
+  // and it lands on the box itself (up to a translation), every tet positive.
+  auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.025, 0.025);
+  MatX3d D = tm.V;
+  for (int i = 0; i < D.rows(); ++i)
+    for (int k = 0; k < 3; ++k) D(i, k) += u(rng);
+  ASSERT_EQ(measure_tets(D, tm.T).inverted, 0);
+  chart::ExtractOptions opt;
+  opt.realize.start = "penalty";
+  const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, D, opt);
+  expect_exact_polycube(e, tm);
+  EXPECT_EQ(e.charts.corners, 8);
+  EXPECT_LT(e.realized.arap, 1e-6);
+  const Vec3 size = e.realized.X.colwise().maxCoeff() - e.realized.X.colwise().minCoeff();
+  EXPECT_NEAR(size.x(), 1, 1e-3);
+  EXPECT_NEAR(size.y(), 2, 1e-3);
+  EXPECT_NEAR(size.z(), 3, 1e-3);
+}
+
 TEST(Realize, Eq17StartPastItsBudgetDoesNotCompeteWithASuccessfulContinuation) {
   // box_hole's eq17 start needs the elliptic untangling (test above), so with a budget of 0 it is
   // past it: "auto" must then give the continuation start's result, whichever thread finishes

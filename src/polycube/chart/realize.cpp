@@ -694,6 +694,177 @@ class Realizer {
     return true;
   }
 
+  // Penalty path from a tangle-free X, for where the continuation stalls: its plane heights (the
+  // means of the deformed coordinates) are fixed, and where a chart is far from flat in the
+  // deformed mesh (homer: 2% of the diagonal) they can ask a thin part for a thickness it does not
+  // have. Here the heights are unknowns beside the coordinates, and
+  //   ARAP(X) + barrier(X) + (w / 2) sum_k sum_{v on plane p of axis k} a_v (X_vk - h_kp)^2
+  // (a_v: v's diagonal entry of the ARAP matrix, so w = 1 weighs a gap like an ARAP strain of
+  // that size) is minimized for w = 1e-2, 1e-1, ... by Newton steps with the barrier's
+  // Gauss-Newton curvature (all axes coupled, factorized afresh) and a line search that keeps
+  // every tet positive; once the largest gap is below 1e-9 of the diagonal (or w reaches 1e10)
+  // the plane vertices land on their heights and any tet that turns over is untangled locally.
+  // Returns true with X on the planes and no tet inverted; `steps` receives the Newton steps.
+  bool penalty_path(MatX3d& X, int& steps) const {
+    const int n = static_cast<int>(rest_.rows());
+    int hoff[4] = {0, 0, 0, 0};
+    for (int k = 0; k < 3; ++k) hoff[k + 1] = hoff[k] + planes_.count[k];
+    const int nh = hoff[3], N = 3 * n + nh;
+    const Eigen::VectorXd a = K_.diagonal();
+    // Heights: the a-weighted means of X over each plane.
+    Eigen::VectorXd h = Eigen::VectorXd::Zero(nh), wsum = Eigen::VectorXd::Zero(nh);
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v)
+        if (const int p = planes_.of_vertex[k][v]; p >= 0) {
+          h[hoff[k] + p] += a[v] * X(v, k);
+          wsum[hoff[k] + p] += a[v];
+        }
+    for (int i = 0; i < nh; ++i) h[i] = wsum[i] > 0 ? h[i] / wsum[i] : 0.0;
+    const double diag = (X.colwise().maxCoeff() - X.colwise().minCoeff()).norm();
+    auto max_gap = [&](const MatX3d& Y, const Eigen::VectorXd& hh) {
+      double m = 0;
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v)
+          if (const int p = planes_.of_vertex[k][v]; p >= 0) m = std::max(m, std::abs(Y(v, k) - hh[hoff[k] + p]));
+      return m;
+    };
+    // Energy and gradient (x: 3 v + k, as energy(); heights after).
+    auto total = [&](const MatX3d& Y, const Eigen::VectorXd& hh, double w, Eigen::VectorXd* g) {
+      Eigen::VectorXd gx;
+      double E = energy(Y, g ? &gx : nullptr, true);
+      if (!std::isfinite(E)) return E;
+      if (g) {
+        g->setZero(N);
+        g->head(3 * n) = gx;
+      }
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v)
+          if (const int p = planes_.of_vertex[k][v]; p >= 0) {
+            const double r = Y(v, k) - hh[hoff[k] + p];
+            E += 0.5 * w * a[v] * r * r;
+            if (g) {
+              (*g)[3 * v + k] += w * a[v] * r;
+              (*g)[3 * n + hoff[k] + p] -= w * a[v] * r;
+            }
+          }
+      return E;
+    };
+    const double kdiag = a.sum();
+    const double reg = 1e-10 * kdiag / std::max(1, 3 * n);
+    steps = 0;
+    auto chol = make_solver();
+    bool analyzed = false;
+    SpMat I(N, N);
+    I.setIdentity();
+    // A free gap shrinks about 10x per stage; where tets being crushed hold it (the barrier
+    // against the penalty), more stages only flatten them further: after three stages in a row
+    // (from w = 10 on) that did not halve the largest gap, the path lands.
+    double last_gap = max_gap(X, h);
+    int held = 0;
+    for (double w = 1e-2; w <= 1e10 && last_gap > 1e-9 * diag && held < 3; w *= 10) {
+      Eigen::VectorXd g;
+      double E = total(X, h, w, &g);
+      if (!std::isfinite(E)) {
+        hooks_.debug("penalty path: a tet is inverted at its start");
+        return false;
+      }
+      for (int it = 0; it < 20; ++it) {
+        // Every tet's 12 x 12 block is in the pattern (zero where its barrier is off), so that
+        // the pattern, and CHOLMOD's analysis of it, stay the same along the path.
+        std::vector<Eigen::Triplet<double>> trip;
+        trip.reserve(3 * K_.nonZeros() / 2 + 78 * T_.rows() + 3 * N);
+        for (int j = 0; j < n; ++j)
+          for (SpMat::InnerIterator e(K_, j); e; ++e)
+            if (e.row() >= j)
+              for (int k = 0; k < 3; ++k) trip.emplace_back(3 * static_cast<int>(e.row()) + k, 3 * j + k, e.value());
+        for (int t = 0; t < T_.rows(); ++t) {
+          double b2 = 0;
+          TetJacobian tj;
+          if (volume_ratio(X, T_, arap_rest_, t) < tau_) {
+            tj = tet_jacobian(X, T_, arap_rest_, t, true);
+            if (tj.J > 0) {
+              const double bw = barrier_weight_ * arap_rest_.w[t];
+              b2 = 2 * bw * (1 - std::log(tj.J / tau_)) / (tj.J * tj.J);
+              // On a nearly flat tet this rank-one term can be 1e20 x the ARAP entries beside
+              // it, more than a factorization resolves (negative pivots): capped at 1e8 x the
+              // ARAP stiffness of the tet's vertices (the line search keeps the barrier exact).
+              double stiff = 0;
+              for (int j = 0; j < 4; ++j) stiff += a[T_(t, j)];
+              b2 = std::min(b2, 1e8 * stiff / std::max(tj.dJ.squaredNorm(), 1e-300));
+            }
+          }
+          for (int p = 0; p < 12; ++p)
+            for (int q = 0; q < 12; ++q) {
+              const int r = 3 * T_(t, p / 3) + p % 3, c = 3 * T_(t, q / 3) + q % 3;
+              if (r >= c) trip.emplace_back(r, c, b2 > 0 ? b2 * tj.dJ[p] * tj.dJ[q] : 0.0);
+            }
+        }
+        for (int k = 0; k < 3; ++k)
+          for (int v = 0; v < n; ++v)
+            if (const int p = planes_.of_vertex[k][v]; p >= 0) {
+              const int hd = 3 * n + hoff[k] + p;
+              trip.emplace_back(3 * v + k, 3 * v + k, w * a[v]);
+              trip.emplace_back(hd, 3 * v + k, -w * a[v]);
+              trip.emplace_back(hd, hd, w * a[v]);
+            }
+        for (int i = 0; i < N; ++i) trip.emplace_back(i, i, 0.0);
+        SpMat H(N, N);
+        H.setFromTriplets(trip.begin(), trip.end());
+        if (!analyzed) {
+          chol->analyzePattern(H);
+          analyzed = true;
+        }
+        // Damped more until it factorizes (the cap above mostly suffices).
+        double damping = reg;
+        for (int tries = 0;; ++tries, damping *= 100) {
+          chol->factorize(H + damping * I);
+          if (chol->info() == Eigen::Success) break;
+          if (tries == 8) {
+            hooks_.debug("penalty path: the Newton matrix is not positive definite");
+            return false;
+          }
+        }
+        const Eigen::VectorXd d = chol->solve(-g);
+        const double slope = d.dot(g);
+        if (!(slope < 0)) break;
+        const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dx(d.data(), n, 3);
+        double s = 1;
+        bool accepted = false;
+        MatX3d Xt;
+        Eigen::VectorXd ht, gt;
+        double Et = E;
+        for (int ls = 0; ls < 40 && !accepted; ++ls, s *= 0.5) {
+          Xt = X + s * dx;
+          ht = h + s * d.tail(nh);
+          Et = total(Xt, ht, w, &gt);
+          accepted = std::isfinite(Et) && Et <= E + 1e-4 * s * slope;
+        }
+        if (!accepted) break;
+        ++steps;
+        const double decrease = E - Et;
+        X = std::move(Xt);
+        h = std::move(ht);
+        g = std::move(gt);
+        E = Et;
+        if (decrease <= 1e-6 * E + 1e-300) break;
+      }
+      hooks_.report("polycube", 0.1 + 0.05 * std::log10(w / 1e-2));
+      const double now = max_gap(X, h);
+      held = w >= 10 && now > 0.5 * last_gap ? held + 1 : 0;  // weaker penalties barely move it
+      last_gap = now;
+    }
+    // Land: the plane vertices on their heights, any tet turned over untangled locally.
+    const double gap = max_gap(X, h);
+    for (int k = 0; k < 3; ++k)
+      for (int v = 0; v < n; ++v)
+        if (const int p = planes_.of_vertex[k][v]; p >= 0) X(v, k) = h[hoff[k] + p];
+    int inverted = count_inverted(X, T_, arap_rest_);
+    hooks_.debug("penalty path: " + std::to_string(steps) + " Newton steps, largest gap to the planes " +
+                 std::to_string(gap / diag) + " x diag, " + std::to_string(inverted) + " tets inverted on landing");
+    if (inverted > 0) untangle_local(X, inverted);
+    return inverted == 0;
+  }
+
   // Puts the plane vertices on their planes at once (the others following by the ARAP response).
   void land(MatX3d& X) const {
     const int n = static_cast<int>(rest_.rows());
@@ -1124,8 +1295,9 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (opt.start == "continuation" || opt.start == "auto") starts.push_back("continuation");
   if (opt.start == "eq17" || opt.start == "auto") starts.push_back("eq17");
   if (opt.start == "previous") starts.push_back("previous");
+  if (opt.start == "penalty") starts.push_back("penalty");
   if (starts.empty())
-    return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto, previous)");
+    return fail("unknown realization start '" + opt.start + "' (continuation, eq17, auto, previous, penalty)");
   const double diag0 = (def.colwise().maxCoeff() - def.colwise().minCoeff()).norm();
   // Boundary triangles not facing their label's direction (or of zero area) in X.
   auto misoriented = [&](const MatX3d& X) {
@@ -1224,7 +1396,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       // retried with the barrier weight x10, x100, ... (opt.continuation_retries times).
       bool landed = false;
       double f = 1;
-      for (int k = 0; k <= opt.continuation_retries && !landed; ++k, f *= 10) {
+      for (int k = 0; k <= (name == "penalty" ? -1 : opt.continuation_retries) && !landed; ++k, f *= 10) {
         X = def;
         solver.set_barrier_weight(f * opt.barrier_weight);
         int steps = 0;
@@ -1233,6 +1405,29 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         if (!landed)
           log.debug("continuation stalled with barrier weight " + std::to_string(f * opt.barrier_weight) + ": " +
                     solver.blocked());
+      }
+      // The penalty path from the deformed mesh; if it too leaves tets inverted, its state
+      // competes with the forced landing's below (the fewer inverted tets; on a tie, its own).
+      MatX3d penalty_state;
+      int penalty_inverted = 0;
+      if (!landed && (name == "penalty" || opt.penalty_path)) {
+        MatX3d Y = def;
+        solver.set_barrier_weight(opt.barrier_weight);
+        int steps = 0;
+        landed = solver.penalty_path(Y, steps);
+        ut += steps;
+        if (landed) {
+          X = std::move(Y);
+        } else {
+          penalty_inverted = count_inverted(Y, T, solver.arap_rest());
+          penalty_state = std::move(Y);
+          if (name == "penalty") {
+            a.failure = "the penalty path left " + std::to_string(penalty_inverted) + " tets inverted";
+            a.tangled = std::move(penalty_state);
+            a.inverted = penalty_inverted;
+            return a;
+          }
+        }
       }
       if (!landed) {
         solver.land(X);
@@ -1248,8 +1443,14 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         if (inverted > 0) {
           a.failure = "moving the deformed mesh onto the planes: " + solver.blocked() + "; " +
                       std::to_string(inverted) + " tets remain inverted after landing and untangling";
-          a.tangled = std::move(X);
-          a.inverted = inverted;
+          if (penalty_state.rows() > 0 && penalty_inverted <= inverted) {
+            a.failure += " (" + std::to_string(penalty_inverted) + " after the penalty path)";
+            a.tangled = std::move(penalty_state);
+            a.inverted = penalty_inverted;
+          } else {
+            a.tangled = std::move(X);
+            a.inverted = inverted;
+          }
           return a;
         }
       }
@@ -1320,9 +1521,18 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (!have) {
     // No start untangled: the state with the fewest inverted tets goes back with the failure, so
     // that the caller can relabel the boundary triangles that face the wrong way there.
+    // The continuation start's state comes first when it has one: every tet stayed positive on its
+    // way to the planes (continuation or penalty path), so its inverted tets are the few the
+    // layout pins, where the eq17 start's state comes from an untangling that may have shrunk the
+    // mesh (homer, --tets 20000: eq17 left 13 inverted, the penalty path 16; the retries from
+    // the eq17 state failed after 11 edge collapses, those from the penalty path's realized it).
     Attempt* least = nullptr;
-    for (Attempt& a : attempts)
-      if (a.tangled.rows() > 0 && (!least || a.inverted < least->inverted)) least = &a;
+    std::pair<int, int> least_key;
+    for (size_t i = 0; i < attempts.size(); ++i) {
+      Attempt& a = attempts[i];
+      const std::pair<int, int> key{starts[i] == "eq17" ? 1 : 0, a.inverted};
+      if (a.tangled.rows() > 0 && (!least || key < least_key)) least = &a, least_key = key;
+    }
     if (least) {
       r.X = std::move(least->tangled);
       r.rest = rest;

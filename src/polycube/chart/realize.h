@@ -45,7 +45,8 @@ struct RealizeOptions {
   /// facing its label beats one without, then the lower final ARAP distortion wins. "previous":
   /// `deformed` is an earlier realization's state (on or near the planes, maybe with tets
   /// inverted, e.g. before an edge collapse): landed on the planes, untangled locally (the
-  /// vertices around the inverted tets), then the ARAP minimization.
+  /// vertices around the inverted tets), then the ARAP minimization. "penalty": the penalty path
+  /// (see penalty_path) from the deformed mesh alone.
   std::string start = "auto";
   int max_iterations = 200;       ///< ARAP Newton iterations at most
   double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively
@@ -72,6 +73,12 @@ struct RealizeOptions {
   /// tets stalled at t = 0.99939, 0.99963, 0.949, 41 s for the three; spot 0.93, 0.80, 0.79;
   /// bumpy torus 0.991, 0.990): none by default.
   int continuation_retries = 0;
+  /// Continuation start: when it stalls, a penalty path from the deformed mesh is tried before
+  /// landing by force: the plane heights become unknowns beside the coordinates and the gaps to
+  /// them are penalized with a weight raised x10 per stage (ARAP + barrier + penalty by Newton
+  /// steps that keep every tet positive), so that a thin part is not asked for a thickness the
+  /// mean heights leave it no room for. Start "penalty" runs it alone.
+  bool penalty_path = true;
   /// Barrier weight (relative to ARAP) on tets whose volume ratio J = det(F) falls below
   /// tau = barrier_threshold x (median J): weight (log(J / tau))^2 below tau, 0 above. ARAP alone
   /// lets tets flatten where charts meet (box_hole: max isometric distortion 59 with 0.01 / 0.05,

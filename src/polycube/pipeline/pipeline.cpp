@@ -527,7 +527,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["realize_options"] = {{"start", opt.polycube.realize.start},
                                {"eq17_budget", opt.polycube.realize.eq17_budget},
                                {"untangle_patience", opt.polycube.realize.untangle_patience},
-                               {"continuation_retries", opt.polycube.realize.continuation_retries}};
+                               {"continuation_retries", opt.polycube.realize.continuation_retries},
+                               {"penalty_path", opt.polycube.realize.penalty_path}};
       if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
         // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
         // axes (a polycube edge), a flat one when they share the label.
