@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
   app.add_option("--realize-start", rz.start,
                  "Polycube realization start: continuation (the deformed mesh moved onto the planes in steps that "
                  "keep tets positive), eq17 (the paper's relaxation, then untangling), auto (both, the lower "
-                 "ARAP distortion wins) or penalty (the penalty path alone, see --no-penalty-path)")
+                 "ARAP distortion wins) or penalty (the penalty path alone, see --penalty-path)")
       ->capture_default_str()->check(CLI::IsMember({"auto", "continuation", "eq17", "penalty"}));
   app.add_option("--eq17-budget", rz.eq17_budget,
                  "Polycube realization, --realize-start auto: elliptic untangling iterations within which the eq17 "
@@ -176,10 +176,10 @@ int main(int argc, char** argv) {
                  "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "
                  "(each) before landing on the planes and untangling")
       ->capture_default_str()->check(CLI::Range(0, 6));
-  app.add_flag("!--no-penalty-path", rz.penalty_path,
-               "Polycube realization: when the continuation start stalls, land on the planes by force at once "
-               "instead of first trying the penalty path (plane heights free, gaps penalized ever more strongly, "
-               "every tet kept positive)");
+  app.add_flag("--penalty-path,!--no-penalty-path", rz.penalty_path,
+               "Polycube realization: when the continuation start stalls, first try the penalty path (plane "
+               "heights free, gaps penalized ever more strongly, every tet kept positive) before landing on the "
+               "planes by force");
   app.add_option("--realize-iterations", rz.max_iterations, "Polycube realization: ARAP iterations at most")
       ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--polycube-map", opt.polycube_map,

@@ -246,7 +246,17 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(j["polycube"]["realize_options"]["untangle_patience"].get<int>(), 3);
   EXPECT_EQ(j["polycube"]["realize_options"]["continuation_retries"].get<int>(), 1);
   EXPECT_EQ(j["polycube"]["realize_options"]["start"].get<std::string>(), "auto");
+  EXPECT_FALSE(j["polycube"]["realize_options"]["penalty_path"].get<bool>());
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  // The penalty path alone, and the flag that turns it off, reach the report too.
+  r = run_cli("--example box_hole --until polycube --realize-start penalty --penalty-path -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(out);
+  EXPECT_EQ(j["polycube"]["realize_options"]["start"].get<std::string>(), "penalty");
+  EXPECT_TRUE(j["polycube"]["realize_options"]["penalty_path"].get<bool>());
+  EXPECT_EQ(j["polycube"]["realization"]["start"].get<std::string>(), "penalty");
+  EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --realize-start penalties -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --untangle-patience 0 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
 }

@@ -10,7 +10,9 @@
 //      "continuation": from the deformed mesh (no tet inverted), the constrained coordinates travel
 //      to their plane heights (mean of the plane's deformed coordinates) in steps that keep every
 //      tet positive, the other coordinates following by the ARAP response and relaxing (optionally
-//      retried with a stronger barrier when nearly flat tets stall it, see continuation_retries);
+//      retried with a stronger barrier when nearly flat tets stall it, see continuation_retries;
+//      optionally, when it stalls, the penalty path first: heights free, gaps penalized, see
+//      penalty_path); "penalty": that path alone;
 //      "eq17": the valence-weighted relaxation of Eq. 17 with the same heights (a sparse
 //      least-squares solve per axis), then plain ARAP local/global steps while tets are inverted;
 //      either start, if tets are still inverted (the continuation landed by force, or ARAP steps
@@ -77,8 +79,11 @@ struct RealizeOptions {
   /// landing by force: the plane heights become unknowns beside the coordinates and the gaps to
   /// them are penalized with a weight raised x10 per stage (ARAP + barrier + penalty by Newton
   /// steps that keep every tet positive), so that a thin part is not asked for a thickness the
-  /// mean heights leave it no room for. Start "penalty" runs it alone.
-  bool penalty_path = true;
+  /// mean heights leave it no room for. Start "penalty" runs it alone. Off by default: on the
+  /// shared meshes whose continuation stalls it has not yet landed where the forced landing
+  /// failed (spot: 36 tets inverted after it against 9; homer: 16-18 against 17), and it costs
+  /// 100-260 Newton steps, each a factorization of the coupled system (see README).
+  bool penalty_path = false;
   /// Barrier weight (relative to ARAP) on tets whose volume ratio J = det(F) falls below
   /// tau = barrier_threshold x (median J): weight (log(J / tau))^2 below tau, 0 above. ARAP alone
   /// lets tets flatten where charts meet (box_hole: max isometric distortion 59 with 0.01 / 0.05,
