@@ -163,14 +163,30 @@ TEST(Chart, OppositeChartsSideBySideAreReported) {
   EXPECT_NE(r.problems[0].find("opposite"), std::string::npos) << r.problems[0];
 }
 
-TEST(Realize, PerturbedBoxBecomesTheBoxAgain) {
+namespace {
+// The 1 x 2 x 3 box's tet mesh and a copy of its vertices each moved by up to `amplitude` per axis.
+std::pair<TetMesh, MatX3d> perturbed_box(unsigned seed, double amplitude) {
   auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
   TetMesh tm = tet_mesh_of(b.V, b.F);
-  std::mt19937 rng(3);
-  std::uniform_real_distribution<double> u(-0.01, 0.01);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-amplitude, amplitude);
   MatX3d D = tm.V;
   for (int i = 0; i < D.rows(); ++i)
     for (int k = 0; k < 3; ++k) D(i, k) += u(rng);
+  return {std::move(tm), std::move(D)};
+}
+
+// Up to a translation, X is the 1 x 2 x 3 box.
+void expect_box_size(const MatX3d& X) {
+  const Vec3 size = X.colwise().maxCoeff() - X.colwise().minCoeff();
+  EXPECT_NEAR(size.x(), 1, 1e-3);
+  EXPECT_NEAR(size.y(), 2, 1e-3);
+  EXPECT_NEAR(size.z(), 3, 1e-3);
+}
+}  // namespace
+
+TEST(Realize, PerturbedBoxBecomesTheBoxAgain) {
+  const auto [tm, D] = perturbed_box(3, 0.01);
   const auto e = chart::extract_polycube(tm.V, tm.T, tm.boundary, D);
   expect_exact_polycube(e, tm);
   EXPECT_EQ(e.charts.charts, 6);
@@ -178,11 +194,7 @@ TEST(Realize, PerturbedBoxBecomesTheBoxAgain) {
   EXPECT_LT(e.realized.arap, 1e-6);
   EXPECT_LT(e.realized.isometric.max, 1.01);
   EXPECT_GE(e.realized.isometric.min, 1.0 - 1e-12);
-  // Up to a translation, the realized polycube is the box.
-  const Vec3 size = e.realized.X.colwise().maxCoeff() - e.realized.X.colwise().minCoeff();
-  EXPECT_NEAR(size.x(), 1, 1e-3);
-  EXPECT_NEAR(size.y(), 2, 1e-3);
-  EXPECT_NEAR(size.z(), 3, 1e-3);
+  expect_box_size(e.realized.X);
 }
 
 TEST(Realize, SphereGivesAnExactSixChartPolycube) {
@@ -355,13 +367,7 @@ TEST(Realize, PenaltyStartRealizesBoxWithThroughHoleLikeTheContinuation) {
 TEST(Realize, PenaltyStartFindsTheHeightsOfAStronglyPerturbedBox) {
   // Every vertex moved by up to 2.5% of the smallest side: the heights are unknowns of the path,
   // and it lands on the box itself (up to a translation), every tet positive.
-  auto b = grid_box(3, Vec3(0, 0, 0), Vec3(1, 2, 3));
-  TetMesh tm = tet_mesh_of(b.V, b.F);
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-0.025, 0.025);
-  MatX3d D = tm.V;
-  for (int i = 0; i < D.rows(); ++i)
-    for (int k = 0; k < 3; ++k) D(i, k) += u(rng);
+  const auto [tm, D] = perturbed_box(5, 0.025);
   ASSERT_EQ(measure_tets(D, tm.T).inverted, 0);
   chart::ExtractOptions opt;
   opt.realize.start = "penalty";
@@ -369,10 +375,7 @@ TEST(Realize, PenaltyStartFindsTheHeightsOfAStronglyPerturbedBox) {
   expect_exact_polycube(e, tm);
   EXPECT_EQ(e.charts.corners, 8);
   EXPECT_LT(e.realized.arap, 1e-6);
-  const Vec3 size = e.realized.X.colwise().maxCoeff() - e.realized.X.colwise().minCoeff();
-  EXPECT_NEAR(size.x(), 1, 1e-3);
-  EXPECT_NEAR(size.y(), 2, 1e-3);
-  EXPECT_NEAR(size.z(), 3, 1e-3);
+  expect_box_size(e.realized.X);
 }
 
 TEST(Realize, Eq17StartPastItsBudgetDoesNotCompeteWithASuccessfulContinuation) {

@@ -248,7 +248,7 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(j["polycube"]["realize_options"]["start"].get<std::string>(), "auto");
   EXPECT_FALSE(j["polycube"]["realize_options"]["penalty_path"].get<bool>());
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
-  // The penalty path alone, and the flag that turns it off, reach the report too.
+  // The penalty path alone, and the flag that turns it on, reach the report too.
   r = run_cli("--example box_hole --until polycube --realize-start penalty --penalty-path -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   j = report(out);

@@ -557,6 +557,16 @@ class Realizer {
   /// The elliptic untangling stops before a round when stop(iterations so far in the call) is true.
   void set_stop(std::function<bool(int)> stop) { stop_ = std::move(stop); }
 
+  // The barrier's Gauss-Newton curvature on tet t at X: b'' of (w log(J / tau))^2, the tet's
+  // Hessian being b'' dJ dJ^T; 0 where the barrier is off (J >= tau) or the tet is inverted.
+  double barrier_curvature(const MatX3d& X, int t, TetJacobian& tj) const {
+    if (!(volume_ratio(X, T_, arap_rest_, t) < tau_)) return 0;
+    tj = tet_jacobian(X, T_, arap_rest_, t, true);
+    if (!(tj.J > 0)) return 0;
+    const double w = barrier_weight_ * arap_rest_.w[t];
+    return 2 * w * (1 - std::log(tj.J / tau_)) / (tj.J * tj.J);
+  }
+
   // Newton iterations on ARAP + barrier from a tangle-free X. Returns iterations.
   // A Newton step with the barrier's curvature: (K (x) I3 + sum_active b''(J) dJ dJ^T) d = -g over
   // the unknowns of `mode`, all axes coupled, factorized afresh. Used when the constant-Hessian
@@ -581,11 +591,9 @@ class Realizer {
           if (a >= 0 && a == b) diag += it.value();
         }
     for (int t = 0; t < T_.rows(); ++t) {
-      if (!(volume_ratio(X, T_, arap_rest_, t) < tau_)) continue;
-      const TetJacobian tj = tet_jacobian(X, T_, arap_rest_, t, true);
-      if (!(tj.J > 0)) continue;
-      const double w = barrier_weight_ * arap_rest_.w[t];
-      const double b2 = 2 * w * (1 - std::log(tj.J / tau_)) / (tj.J * tj.J);
+      TetJacobian tj;
+      const double b2 = barrier_curvature(X, t, tj);
+      if (b2 == 0) continue;
       for (int p = 0; p < 12; ++p)
         for (int q = 0; q < 12; ++q) {
           const int a = dof(T_(t, p / 3), p % 3), b = dof(T_(t, q / 3), q % 3);
@@ -704,8 +712,9 @@ class Realizer {
   // Gauss-Newton curvature (all axes coupled, factorized afresh) and a line search that keeps
   // every tet positive; once the largest gap is below 1e-9 of the diagonal (or w reaches 1e10)
   // the plane vertices land on their heights and any tet that turns over is untangled locally.
-  // Returns true with X on the planes and no tet inverted; `steps` receives the Newton steps.
-  bool penalty_path(MatX3d& X, int& steps) const {
+  // Returns the tets left inverted (0: X is on the planes, every tet positive); `steps` receives
+  // the Newton steps.
+  int penalty_path(MatX3d& X, int& steps) const {
     const int n = static_cast<int>(rest_.rows());
     int hoff[4] = {0, 0, 0, 0};
     for (int k = 0; k < 3; ++k) hoff[k + 1] = hoff[k] + planes_.count[k];
@@ -749,13 +758,43 @@ class Realizer {
           }
       return E;
     };
-    const double kdiag = a.sum();
-    const double reg = 1e-10 * kdiag / std::max(1, 3 * n);
-    steps = 0;
-    auto chol = make_solver();
-    bool analyzed = false;
+    // The Newton matrix is A + w P + B (lower triangles): A = the ARAP matrix on every axis with
+    // every tet's 12 x 12 block and the diagonal in its pattern (zeros there), P the penalty for
+    // w = 1, B the barrier's curvature on the tets where it acts, inside A's pattern. A and P are
+    // built once, and the pattern, so CHOLMOD's analysis of it, stays the same along the path.
+    SpMat A(N, N), P(N, N);
+    {
+      std::vector<Eigen::Triplet<double>> trip;
+      trip.reserve(3 * K_.nonZeros() / 2 + 78 * T_.rows() + N);
+      for (int j = 0; j < n; ++j)
+        for (SpMat::InnerIterator e(K_, j); e; ++e)
+          if (e.row() >= j)
+            for (int k = 0; k < 3; ++k) trip.emplace_back(3 * static_cast<int>(e.row()) + k, 3 * j + k, e.value());
+      for (int t = 0; t < T_.rows(); ++t)
+        for (int p = 0; p < 12; ++p)
+          for (int q = 0; q <= p; ++q) {
+            const int r = 3 * T_(t, p / 3) + p % 3, c = 3 * T_(t, q / 3) + q % 3;
+            trip.emplace_back(std::max(r, c), std::min(r, c), 0.0);
+          }
+      for (int i = 0; i < N; ++i) trip.emplace_back(i, i, 0.0);
+      A.setFromTriplets(trip.begin(), trip.end());
+      trip.clear();
+      for (int k = 0; k < 3; ++k)
+        for (int v = 0; v < n; ++v)
+          if (const int p = planes_.of_vertex[k][v]; p >= 0) {
+            const int hd = 3 * n + hoff[k] + p;
+            trip.emplace_back(3 * v + k, 3 * v + k, a[v]);
+            trip.emplace_back(hd, 3 * v + k, -a[v]);
+            trip.emplace_back(hd, hd, a[v]);
+          }
+      P.setFromTriplets(trip.begin(), trip.end());
+    }
     SpMat I(N, N);
     I.setIdentity();
+    const double reg = 1e-10 * a.sum() / std::max(1, 3 * n);
+    auto chol = make_solver();
+    bool analyzed = false;
+    steps = 0;
     // (Landing early once three stages in a row failed to halve the largest gap was tried: on
     // homer it landed from a gap of 0.9% of the diagonal, 2454 tets inverted.)
     for (double w = 1e-2; w <= 1e10 && max_gap(X, h) > 1e-9 * diag; w *= 10) {
@@ -763,50 +802,30 @@ class Realizer {
       double E = total(X, h, w, &g);
       if (!std::isfinite(E)) {
         hooks_.debug("penalty path: a tet is inverted at its start");
-        return false;
+        return count_inverted(X, T_, arap_rest_);
       }
+      const SpMat Aw = A + w * P;
       for (int it = 0; it < 20; ++it) {
-        // Every tet's 12 x 12 block is in the pattern (zero where its barrier is off), so that
-        // the pattern, and CHOLMOD's analysis of it, stay the same along the path.
         std::vector<Eigen::Triplet<double>> trip;
-        trip.reserve(3 * K_.nonZeros() / 2 + 78 * T_.rows() + 3 * N);
-        for (int j = 0; j < n; ++j)
-          for (SpMat::InnerIterator e(K_, j); e; ++e)
-            if (e.row() >= j)
-              for (int k = 0; k < 3; ++k) trip.emplace_back(3 * static_cast<int>(e.row()) + k, 3 * j + k, e.value());
         for (int t = 0; t < T_.rows(); ++t) {
-          double b2 = 0;
           TetJacobian tj;
-          if (volume_ratio(X, T_, arap_rest_, t) < tau_) {
-            tj = tet_jacobian(X, T_, arap_rest_, t, true);
-            if (tj.J > 0) {
-              const double bw = barrier_weight_ * arap_rest_.w[t];
-              b2 = 2 * bw * (1 - std::log(tj.J / tau_)) / (tj.J * tj.J);
-              // On a nearly flat tet this rank-one term can be 1e20 x the ARAP entries beside
-              // it, more than a factorization resolves (negative pivots): capped at 1e8 x the
-              // ARAP stiffness of the tet's vertices (the line search keeps the barrier exact).
-              double stiff = 0;
-              for (int j = 0; j < 4; ++j) stiff += a[T_(t, j)];
-              b2 = std::min(b2, 1e8 * stiff / std::max(tj.dJ.squaredNorm(), 1e-300));
-            }
-          }
+          double b2 = barrier_curvature(X, t, tj);
+          if (b2 == 0) continue;
+          // On a nearly flat tet this rank-one term can be 1e20 x the ARAP entries beside it,
+          // more than a factorization resolves (negative pivots): capped at 1e8 x the ARAP
+          // stiffness of the tet's vertices (the line search keeps the barrier exact).
+          double stiff = 0;
+          for (int j = 0; j < 4; ++j) stiff += a[T_(t, j)];
+          b2 = std::min(b2, 1e8 * stiff / std::max(tj.dJ.squaredNorm(), 1e-300));
           for (int p = 0; p < 12; ++p)
             for (int q = 0; q < 12; ++q) {
               const int r = 3 * T_(t, p / 3) + p % 3, c = 3 * T_(t, q / 3) + q % 3;
-              if (r >= c) trip.emplace_back(r, c, b2 > 0 ? b2 * tj.dJ[p] * tj.dJ[q] : 0.0);
+              if (r >= c) trip.emplace_back(r, c, b2 * tj.dJ[p] * tj.dJ[q]);
             }
         }
-        for (int k = 0; k < 3; ++k)
-          for (int v = 0; v < n; ++v)
-            if (const int p = planes_.of_vertex[k][v]; p >= 0) {
-              const int hd = 3 * n + hoff[k] + p;
-              trip.emplace_back(3 * v + k, 3 * v + k, w * a[v]);
-              trip.emplace_back(hd, 3 * v + k, -w * a[v]);
-              trip.emplace_back(hd, hd, w * a[v]);
-            }
-        for (int i = 0; i < N; ++i) trip.emplace_back(i, i, 0.0);
-        SpMat H(N, N);
-        H.setFromTriplets(trip.begin(), trip.end());
+        SpMat B(N, N);
+        B.setFromTriplets(trip.begin(), trip.end());
+        const SpMat H = Aw + B;
         if (!analyzed) {
           chol->analyzePattern(H);
           analyzed = true;
@@ -818,13 +837,13 @@ class Realizer {
           if (chol->info() == Eigen::Success) break;
           if (tries == 8) {
             hooks_.debug("penalty path: the Newton matrix is not positive definite");
-            return false;
+            return count_inverted(X, T_, arap_rest_);
           }
         }
         const Eigen::VectorXd d = chol->solve(-g);
         const double slope = d.dot(g);
         if (!(slope < 0)) break;
-        const Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, 3, Eigen::RowMajor>> dx(d.data(), n, 3);
+        const Eigen::Map<const MatX3d> dx(d.data(), n, 3);
         double s = 1;
         bool accepted = false;
         MatX3d Xt;
@@ -856,7 +875,7 @@ class Realizer {
     hooks_.debug("penalty path: " + std::to_string(steps) + " Newton steps, largest gap to the planes " +
                  std::to_string(gap / diag) + " x diag, " + std::to_string(inverted) + " tets inverted on landing");
     if (inverted > 0) untangle_local(X, inverted);
-    return inverted == 0;
+    return inverted;
   }
 
   // Puts the plane vertices on their planes at once (the others following by the ARAP response).
@@ -1390,7 +1409,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       // retried with the barrier weight x10, x100, ... (opt.continuation_retries times).
       bool landed = false;
       double f = 1;
-      for (int k = 0; k <= (name == "penalty" ? -1 : opt.continuation_retries) && !landed; ++k, f *= 10) {
+      const int continuations = name == "penalty" ? 0 : 1 + opt.continuation_retries;  // "penalty": none
+      for (int k = 0; k < continuations && !landed; ++k, f *= 10) {
         X = def;
         solver.set_barrier_weight(f * opt.barrier_weight);
         int steps = 0;
@@ -1408,12 +1428,12 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         MatX3d Y = def;
         solver.set_barrier_weight(opt.barrier_weight);
         int steps = 0;
-        landed = solver.penalty_path(Y, steps);
+        penalty_inverted = solver.penalty_path(Y, steps);
         ut += steps;
+        landed = penalty_inverted == 0;
         if (landed) {
           X = std::move(Y);
         } else {
-          penalty_inverted = count_inverted(Y, T, solver.arap_rest());
           penalty_state = std::move(Y);
           if (name == "penalty") {
             a.failure = "the penalty path left " + std::to_string(penalty_inverted) + " tets inverted";
