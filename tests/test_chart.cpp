@@ -257,6 +257,76 @@ TEST(Chart, CleanupSeparatesOppositeCharts) {
     }
 }
 
+// A thin wedge along y: knife edge at x = 0, back face at x = 1 (height 2h), top and bottom faces
+// meeting at the knife with normals about +Z and -Z (a sheet folded flat, as surface mode's
+// deformation leaves thin parts).
+SurfaceMesh wedge(int n, double h) {
+  std::vector<Eigen::Vector2d> profile;  // (x, z): knife -> top back -> bottom back
+  const Eigen::Vector2d A(0, 0), B(1, h), C(1, -h);
+  for (auto [p, q] : {std::pair{A, B}, std::pair{B, C}, std::pair{C, A}})
+    for (int i = 0; i < n; ++i) profile.push_back(p + (q - p) * (double(i) / n));
+  const int m = static_cast<int>(profile.size());
+  std::vector<Vec3> V;
+  std::vector<Eigen::Vector3i> F;
+  for (int j = 0; j <= n; ++j)
+    for (const auto& p : profile) V.emplace_back(p[0], double(j) / n, p[1]);
+  auto id = [&](int i, int j) { return j * m + (i % m); };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < m; ++i) {
+      F.emplace_back(id(i, j), id(i + 1, j), id(i + 1, j + 1));
+      F.emplace_back(id(i, j), id(i + 1, j + 1), id(i, j + 1));
+    }
+  const Eigen::Vector2d c = (A + B + C) / 3;
+  for (int j : {0, n}) {
+    const int centre = static_cast<int>(V.size());
+    V.emplace_back(c[0], double(j) / n, c[1]);
+    for (int i = 0; i < m; ++i) {
+      if (j == 0) F.emplace_back(centre, id(i + 1, j), id(i, j));
+      else F.emplace_back(centre, id(i, j), id(i + 1, j));
+    }
+  }
+  SurfaceMesh s;
+  s.V.resize(static_cast<Eigen::Index>(V.size()), 3);
+  for (size_t v = 0; v < V.size(); ++v) s.V.row(static_cast<Eigen::Index>(v)) = V[v].transpose();
+  s.F.resize(static_cast<Eigen::Index>(F.size()), 3);
+  for (size_t f = 0; f < F.size(); ++f) s.F.row(static_cast<Eigen::Index>(f)) = F[f].transpose();
+  return s;
+}
+
+TEST(Chart, CleanupOpensARimWhereAFoldedSheetMeetsItself) {
+  const auto s = wedge(8, 0.02);
+  ASSERT_GT(enclosed_volume(s.V, s.F), 0);
+  auto labels = chart::label_by_normal(s.V, s.F);
+  const auto initial = labels;
+  ASSERT_EQ(chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels).opposite_adjacent, 1);
+  const auto st = chart::cleanup_labels(s.V, s.F, labels);
+  EXPECT_EQ(st.rims, 1);
+  const auto r = chart::check_charts(s.F, static_cast<int>(s.V.rows()), labels);
+  EXPECT_TRUE(r.valid) << (r.problems.empty() ? "" : r.problems[0]);
+  EXPECT_EQ(r.charts, 6);  // +Z, -Z, the rim (-X) at the knife, the back (+X) and the two ends
+  EXPECT_EQ(r.corners, 8);
+  // Both sides of the sheet keep their labels but for the rim (one row of triangles).
+  for (int l : {kPosZ, kNegZ}) {
+    int before = 0, kept = 0;
+    for (size_t f = 0; f < labels.size(); ++f) {
+      before += initial[f] == l;
+      kept += initial[f] == l && labels[f] == l;
+    }
+    EXPECT_GE(kept, before * 3 / 4) << chart::label_name(l);
+  }
+  int rim = 0;
+  for (size_t f = 0; f < labels.size(); ++f) rim += labels[f] == kNegX;
+  EXPECT_GT(rim, 0);
+  // With rims off, the removal of the degree-3 ends cascades: the layout is lost.
+  auto whole = initial;
+  chart::CleanupOptions o;
+  o.rim_above = 1;
+  EXPECT_EQ(chart::cleanup_labels(s.V, s.F, whole, o).rims, 0);
+  const auto rw = chart::check_charts(s.F, static_cast<int>(s.V.rows()), whole);
+  EXPECT_FALSE(rw.valid);
+  EXPECT_LT(rw.charts, 6);
+}
+
 TEST(Realize, SplitTetEdgesKeepsVolumeAndOrientation) {
   // Two tets sharing the edge (0, 1); splitting it and another edge of the first tet.
   MatX3d V(5, 3);

@@ -571,6 +571,14 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       hooks.debug("relabelling the misoriented triangles is undone by the cleanup; no retry");
       break;
     }
+    // A local relabelling that the cleanup turns into a cascade of chart removals (humanoid in
+    // surface mode: 35 charts -> 1) gives no better layout.
+    if (const ChartReport after = check_charts(CB, static_cast<int>(deformed.rows()), next);
+        after.charts < e.charts.charts / 2) {
+      hooks.debug("relabelling the misoriented triangles leaves " + std::to_string(after.charts) + " of " +
+                  std::to_string(e.charts.charts) + " charts after the cleanup; no retry");
+      break;
+    }
     CL = std::move(next);
     sync_labels();
     e.cleanup.zigzags += again.zigzags;
@@ -579,6 +587,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     e.cleanup.degree2 += again.degree2;
     e.cleanup.degree3 += again.degree3;
     e.cleanup.opposite += again.opposite;
+    e.cleanup.rims += again.rims;
     e.cleanup.misoriented += changed;
     e.cleanup.relabelled_faces = 0;
     for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];

@@ -207,6 +207,87 @@ int fix_wide_fans(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector
   return changed;
 }
 
+// Step 4 for a large chart: opposite charts meet along a knife edge (a sheet folded flat, which
+// surface mode's in-plane ARAP leaves unpenalized). Relabelling the whole smaller chart would
+// remove a large part of the layout (and start a cascade of removals: humanoid in surface mode went
+// from 34 charts to 1); instead its triangles at the meeting vertices form a rim, each taking the
+// perpendicular label of the outward direction there (the sum, over the triangles around each
+// meeting vertex, of centroid -> vertex, projected off the charts' axis). Returns the triangles
+// relabelled.
+int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const std::vector<std::vector<int>>& vcharts,
+             int small, bool require_fold, std::vector<int>& labels) {
+  const int axis = axis_of(c.label[small]);
+  const int nv = static_cast<int>(X.rows());
+  std::vector<char> meeting(nv, 0);
+  for (int v = 0; v < nv; ++v) {
+    const auto& l = vcharts[v];
+    const bool has_small = std::find(l.begin(), l.end(), small) != l.end();
+    const bool has_opposite =
+        std::any_of(l.begin(), l.end(), [&](int ch) { return c.label[ch] == (c.label[small] ^ 1); });
+    meeting[v] = has_small && has_opposite;
+  }
+  // Only a fold: the triangles of both sides at the meeting vertices face their own labels (a
+  // patch labelled against its normals, e.g. by an earlier step, is relabelled whole instead).
+  Vec3 n_small = Vec3::Zero(), n_opposite = Vec3::Zero();
+  for (int f = 0; f < F.rows(); ++f) {
+    const int l = c.label[c.of_face[f]];
+    if (l != c.label[small] && l != (c.label[small] ^ 1)) continue;
+    if (!meeting[F(f, 0)] && !meeting[F(f, 1)] && !meeting[F(f, 2)]) continue;
+    const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), cc = X.row(F(f, 2));
+    (c.of_face[f] == small ? n_small : n_opposite) += (b - a).cross(cc - a);
+  }
+  const double kFacing = 0.5;
+  if (require_fold && (!(n_small.dot(label_direction(c.label[small])) > kFacing * n_small.norm()) ||
+                       !(n_opposite.dot(label_direction(c.label[small] ^ 1)) > kFacing * n_opposite.norm())))
+    return 0;
+  std::vector<Vec3> out(nv, Vec3::Zero());
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 centroid = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
+    for (int j = 0; j < 3; ++j)
+      if (meeting[F(f, j)]) out[F(f, j)] += X.row(F(f, j)).transpose() - centroid;
+  }
+  int changed = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    if (c.of_face[f] != small) continue;
+    Vec3 o = Vec3::Zero();
+    for (int j = 0; j < 3; ++j)
+      if (meeting[F(f, j)]) o += out[F(f, j)];
+    o[axis] = 0;
+    if (!(o.squaredNorm() > 0)) continue;
+    labels[f] = label_of(o);
+    ++changed;
+  }
+  return changed;
+}
+
+// Per vertex: the charts of its triangles.
+std::vector<std::vector<int>> charts_at_vertices(const MatX3i& F, const Charts& c, int nv) {
+  std::vector<std::vector<int>> vc(nv);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int j = 0; j < 3; ++j) {
+      auto& l = vc[F(f, j)];
+      if (std::find(l.begin(), l.end(), c.of_face[f]) == l.end()) l.push_back(c.of_face[f]);
+    }
+  return vc;
+}
+
+// Charts meeting a chart of the opposite label (along an edge or at a vertex), each the smaller
+// of such a pair, by increasing area (equal areas: in the order the vertices first show them).
+std::vector<int> smaller_of_opposite_pairs(const Charts& c, const std::vector<std::vector<int>>& vcharts) {
+  std::vector<int> out;
+  std::vector<char> seen(c.count(), 0);
+  for (const auto& l : vcharts)
+    for (int a : l)
+      for (int b : l)
+        if (c.label[a] == (c.label[b] ^ 1)) {
+          const int small = c.area[a] <= c.area[b] ? a : b;
+          if (!seen[small]) out.push_back(small);
+          seen[small] = 1;
+        }
+  std::stable_sort(out.begin(), out.end(), [&](int a, int b) { return c.area[a] < c.area[b]; });
+  return out;
+}
+
 }  // namespace
 
 int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& F, std::vector<int>& labels,
@@ -269,11 +350,31 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       s.degenerate += d;
       changed |= d > 0;
     }
-    if (opt.remove_low_degree) {
+    bool rim_opened = false;
+    if (opt.separate_opposite && s.rims < opt.max_rims) {
+      // Step 4 for folds, before the low-degree removal: a large chart meeting its opposite along
+      // a fold gets a rim (open_rim). Removing low-degree charts first could strip the fold of
+      // what surrounds it (a thin wedge's two triangular ends have degree 3, and their removal
+      // cascades until one chart is left).
+      const Charts c = build_charts(X, F, labels);
+      const auto vcharts = charts_at_vertices(F, c, static_cast<int>(X.rows()));
+      const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
+      for (int small : smaller_of_opposite_pairs(c, vcharts)) {
+        if (!(c.area[small] > opt.rim_above * total)) continue;
+        if (open_rim(X, F, c, vcharts, small, true, labels) > 0) {
+          s.rims++;
+          changed = rim_opened = true;
+          break;
+        }
+      }
+    }
+    if (opt.remove_low_degree && !rim_opened) {
       // Remove the smallest chart of the lowest degree <= 3, then start over.
       const Charts c = build_charts(X, F, labels);
+      const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
       int best = -1, best_deg = 4;
       for (int i = 0; i < c.count(); ++i) {
+        if (c.area[i] > opt.keep_above * total) continue;
         const int deg = c.degree(i);
         if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
           best = i;
@@ -282,12 +383,15 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       }
       if (best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
         // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
-        // avoiding the opposite label when another choice exists.
+        // avoiding, when another choice exists, the opposite label and a label whose opposite is
+        // another neighbour's (the merged chart would meet it).
         int to = -1;
         double len = -1;
         for (auto [n, l] : c.neighbors[best]) {
           const bool opposite = (c.label[n] ^ 1) == c.label[best];
-          const double score = opposite ? l * 1e-6 : l;
+          const bool meets_opposite = std::any_of(c.neighbors[best].begin(), c.neighbors[best].end(),
+                                                  [&](const auto& m) { return c.label[m.first] == (c.label[n] ^ 1); });
+          const double score = opposite ? l * 1e-6 : meets_opposite ? l * 1e-3 : l;
           if (score > len) {
             len = score;
             to = n;
@@ -303,20 +407,37 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       // Opposite charts meeting (along an edge or at a vertex) would give the polycube zero
       // thickness: the smaller one takes the label of its longest-bordered non-opposite neighbour.
       const Charts c = build_charts(X, F, labels);
-      std::vector<std::vector<int>> vcharts(X.rows());
-      for (int f = 0; f < F.rows(); ++f)
-        for (int j = 0; j < 3; ++j) {
-          auto& l = vcharts[F(f, j)];
-          if (std::find(l.begin(), l.end(), c.of_face[f]) == l.end()) l.push_back(c.of_face[f]);
+      const auto vcharts = charts_at_vertices(F, c, static_cast<int>(X.rows()));
+      const auto pairs = smaller_of_opposite_pairs(c, vcharts);
+      int worst = pairs.empty() ? -1 : pairs.front();
+      // A large chart that faces its label (where it meets its opposite only at a vertex or along
+      // a short border: humanoid in surface mode had a +X chart of 21% of the area relabelled
+      // whole, which started a cascade of removals) only loses its triangles at the contact.
+      if (worst >= 0 && s.rims < opt.max_rims) {
+        const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
+        Vec3 normal = Vec3::Zero();
+        for (int f = 0; f < F.rows(); ++f)
+          if (c.of_face[f] == worst) {
+            const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), cc = X.row(F(f, 2));
+            normal += (b - a).cross(cc - a);
+          }
+        if (c.area[worst] > opt.rim_above * total &&
+            normal.dot(label_direction(c.label[worst])) > 0.5 * normal.norm() &&
+            open_rim(X, F, c, vcharts, worst, false, labels) > 0) {
+          s.rims++;
+          changed = true;
+          worst = -1;
         }
-      int worst = -1;
-      for (const auto& l : vcharts)
-        for (int a : l)
-          for (int b : l)
-            if (c.label[a] == (c.label[b] ^ 1)) {
-              const int small = c.area[a] <= c.area[b] ? a : b;
-              if (worst < 0 || c.area[small] < c.area[worst]) worst = small;
-            }
+      }
+      if (worst >= 0) {
+        worst = -1;
+        const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
+        for (int p : pairs)
+          if (c.area[p] <= opt.keep_above * total) {
+            worst = p;
+            break;
+          }
+      }
       if (worst >= 0) {
         int to = -1;
         double len = -1;

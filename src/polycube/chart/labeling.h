@@ -63,6 +63,16 @@ struct CleanupOptions {
   bool fix_degenerate = true;    ///< relabel triangles that would be flattened (step 2)
   bool remove_low_degree = true; ///< remove charts of degree 1, 2 (and 3) (step 3)
   bool separate_opposite = true; ///< relabel the smaller of two opposite charts that meet (step 4)
+  /// Step 4, when the smaller chart's area is above this fraction of the total: only its triangles
+  /// at the meeting vertices are relabelled (a rim with the labels of the outward direction there)
+  double rim_above = 0.01;
+  /// Rims opened at most per cleanup (a rim can meet a chart opposite to its own label, be removed
+  /// and be opened again; past this, step 4 relabels whole charts)
+  int max_rims = 4;
+  /// Steps 3 and 4 never relabel a whole chart above this fraction of the total area (such a
+  /// removal changes the layout's structure, and starts cascades: humanoid in surface mode lost
+  /// every chart but one); the chart graph check reports what stays invalid
+  double keep_above = 0.05;
   int max_rounds = 1000;         ///< cap on relabelling rounds (each round removes one chart or more)
 };
 
@@ -72,6 +82,7 @@ struct CleanupStats {
   int degenerate = 0;  ///< triangles relabelled because they would be flattened
   int degree1 = 0, degree2 = 0, degree3 = 0;  ///< charts removed, by degree
   int opposite = 0;    ///< charts relabelled because they met a chart of the opposite label
+  int rims = 0;        ///< rims opened between large opposite charts that met (see rim_above)
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
   int misoriented = 0; ///< triangles relabelled after a realization left them facing away (extract_polycube)
