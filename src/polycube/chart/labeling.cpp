@@ -371,10 +371,8 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
     if (opt.remove_low_degree && !rim_opened) {
       // Remove the smallest chart of the lowest degree <= 3, then start over.
       const Charts c = build_charts(X, F, labels);
-      const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
       int best = -1, best_deg = 4;
       for (int i = 0; i < c.count(); ++i) {
-        if (c.area[i] > opt.keep_above * total) continue;
         const int deg = c.degree(i);
         if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
           best = i;
@@ -428,15 +426,6 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
           changed = true;
           worst = -1;
         }
-      }
-      if (worst >= 0) {
-        worst = -1;
-        const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
-        for (int p : pairs)
-          if (c.area[p] <= opt.keep_above * total) {
-            worst = p;
-            break;
-          }
       }
       if (worst >= 0) {
         int to = -1;

@@ -69,10 +69,6 @@ struct CleanupOptions {
   /// Rims opened at most per cleanup (a rim can meet a chart opposite to its own label, be removed
   /// and be opened again; past this, step 4 relabels whole charts)
   int max_rims = 4;
-  /// Steps 3 and 4 never relabel a whole chart above this fraction of the total area (such a
-  /// removal changes the layout's structure, and starts cascades: humanoid in surface mode lost
-  /// every chart but one); the chart graph check reports what stays invalid
-  double keep_above = 0.05;
   int max_rounds = 1000;         ///< cap on relabelling rounds (each round removes one chart or more)
 };
 
