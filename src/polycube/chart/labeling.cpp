@@ -212,8 +212,9 @@ int fix_wide_fans(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector
 // remove a large part of the layout (and start a cascade of removals: humanoid in surface mode went
 // from 34 charts to 1); instead its triangles at the meeting vertices form a rim, each taking the
 // perpendicular label of the outward direction there (the sum, over the triangles around each
-// meeting vertex, of centroid -> vertex, projected off the charts' axis). Returns the triangles
-// relabelled.
+// meeting vertex, of centroid -> vertex, projected off the charts' axis). require_fold: only where
+// both sides face their labels at the meeting vertices (otherwise the contact is a vertex or a
+// mislabelled patch, and the caller decides). Returns the triangles relabelled.
 int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const std::vector<std::vector<int>>& vcharts,
              int small, bool require_fold, std::vector<int>& labels) {
   const int axis = axis_of(c.label[small]);
