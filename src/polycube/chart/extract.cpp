@@ -58,7 +58,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   e.initial_charts = build_charts(deformed, B, e.labels).count();
   const std::vector<int> raw = e.labels;
   const int collapsed = relabel_collapsed(rest, deformed, B, e.labels, opt.collapsed_ratio);
-  e.cleanup = cleanup_labels(deformed, B, e.labels, opt.cleanup);
+  e.cleanup = cleanup_labels(deformed, B, e.labels, opt.cleanup, hooks);
   e.cleanup.collapsed = collapsed;
   e.cleanup.relabelled_faces = 0;
   for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];
@@ -560,7 +560,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         progress = true;
       }
     }
-    const CleanupStats again = changed > 0 ? cleanup_labels(deformed, CB, next, opt.cleanup) : CleanupStats{};
+    const CleanupStats again = changed > 0 ? cleanup_labels(deformed, CB, next, opt.cleanup, hooks) : CleanupStats{};
     if (next == CL) {
       // Nothing changed, or the cleanup undid the relabelling (e.g. the triangles were zigzags).
       if (!widen && e.realized.inverted > 0) {

@@ -335,7 +335,17 @@ int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& 
   return changed;
 }
 
-CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels, const CleanupOptions& opt) {
+CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels, const CleanupOptions& opt,
+                            const Hooks& hooks) {
+  // A whole large chart relabelled changes the layout's structure: said, for -v.
+  auto tell = [&](const Charts& c, int chart, int to, const char* why) {
+    const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
+    if (!(c.area[chart] > 0.05 * total)) return;
+    hooks.debug("cleanup: chart " + std::to_string(chart) + " (" + label_name(c.label[chart]) + ", " +
+                std::to_string(c.faces[chart]) + " triangles, " +
+                std::to_string(static_cast<int>(std::lround(100 * c.area[chart] / total))) + "% of the area, degree " +
+                std::to_string(c.degree(chart)) + ") relabelled " + label_name(c.label[to]) + ": " + why);
+  };
   CleanupStats s;
   const std::vector<int> initial = labels;
   const MatX3i N = face_adjacency(F);
@@ -362,7 +372,10 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
       for (int small : smaller_of_opposite_pairs(c, vcharts)) {
         if (!(c.area[small] > opt.rim_above * total)) continue;
-        if (open_rim(X, F, c, vcharts, small, true, labels) > 0) {
+        if (const int r = open_rim(X, F, c, vcharts, small, true, labels); r > 0) {
+          hooks.debug("cleanup: rim of " + std::to_string(r) + " triangles on chart " + std::to_string(small) + " (" +
+                      label_name(c.label[small]) + ", " + std::to_string(c.faces[small]) +
+                      " triangles) where it folds onto its opposite");
           s.rims++;
           changed = rim_opened = true;
           break;
@@ -372,30 +385,44 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
     if (opt.remove_low_degree && !rim_opened) {
       // Remove the smallest chart of the lowest degree <= 3, then start over.
       const Charts c = build_charts(X, F, labels);
-      int best = -1, best_deg = 4;
-      for (int i = 0; i < c.count(); ++i) {
-        const int deg = c.degree(i);
-        if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
-          best = i;
-          best_deg = deg;
-        }
-      }
-      if (best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
-        // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
-        // avoiding, when another choice exists, the opposite label and a label whose opposite is
-        // another neighbour's (the merged chart would meet it).
+      // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
+      // avoiding, when another choice exists, the opposite label and a label whose opposite is
+      // another neighbour's (the merged chart would meet it). safe: a neighbour of neither kind.
+      auto target = [&](int i, bool& safe) {
         int to = -1;
         double len = -1;
-        for (auto [n, l] : c.neighbors[best]) {
-          const bool opposite = (c.label[n] ^ 1) == c.label[best];
-          const bool meets_opposite = std::any_of(c.neighbors[best].begin(), c.neighbors[best].end(),
+        safe = false;
+        for (auto [n, l] : c.neighbors[i]) {
+          const bool opposite = (c.label[n] ^ 1) == c.label[i];
+          const bool meets_opposite = std::any_of(c.neighbors[i].begin(), c.neighbors[i].end(),
                                                   [&](const auto& m) { return c.label[m.first] == (c.label[n] ^ 1); });
+          safe |= !opposite && !meets_opposite;
           const double score = opposite ? l * 1e-6 : meets_opposite ? l * 1e-3 : l;
           if (score > len) {
             len = score;
             to = n;
           }
         }
+        return to;
+      };
+      int best = -1, best_deg = 4;
+      for (int i = 0; i < c.count(); ++i) {
+        const int deg = c.degree(i);
+        if (deg < best_deg || (deg == best_deg && best >= 0 && c.area[i] < c.area[best])) {
+          // Once a rim is open, a chart of degree 2 or 3 with no safe neighbour stays (a rim
+          // between the two sides of a fold would go back into one of them and the fold close
+          // again, until the rims run out and a side is relabelled whole).
+          bool safe = true;
+          if (s.rims > 0 && deg >= 2) target(i, safe);
+          if (!safe) continue;
+          best = i;
+          best_deg = deg;
+        }
+      }
+      if (best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
+        bool safe;
+        const int to = target(best, safe);
+        tell(c, best, to, "low degree");
         for (int f = 0; f < F.rows(); ++f)
           if (c.of_face[f] == best) labels[f] = c.label[to];
         (best_deg == 1 ? s.degree1 : best_deg == 2 ? s.degree2 : s.degree3)++;
@@ -420,9 +447,13 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
             const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), cc = X.row(F(f, 2));
             normal += (b - a).cross(cc - a);
           }
+        int r = 0;
         if (c.area[worst] > opt.rim_above * total &&
             normal.dot(label_direction(c.label[worst])) > 0.5 * normal.norm() &&
-            open_rim(X, F, c, vcharts, worst, false, labels) > 0) {
+            (r = open_rim(X, F, c, vcharts, worst, false, labels)) > 0) {
+          hooks.debug("cleanup: rim of " + std::to_string(r) + " triangles on chart " + std::to_string(worst) + " (" +
+                      label_name(c.label[worst]) + ", " + std::to_string(c.faces[worst]) +
+                      " triangles) where it meets its opposite");
           s.rims++;
           changed = true;
           worst = -1;
@@ -437,6 +468,7 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
             to = n;
           }
         if (to >= 0) {
+          tell(c, worst, to, "meets its opposite");
           for (int f = 0; f < F.rows(); ++f)
             if (c.of_face[f] == worst) labels[f] = c.label[to];
           s.opposite++;

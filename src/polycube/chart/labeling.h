@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "polycube/core/log.h"
 #include "polycube/core/types.h"
 
 namespace polycube::chart {
@@ -95,8 +96,9 @@ int relabel_collapsed(const MatX3d& rest, const MatX3d& deformed, const MatX3i& 
                       double ratio = 1e-3);
 
 /// Cleans `labels` (one per triangle of F) in place. X: positions used for border lengths.
+/// hooks: a debug message for every whole chart above 5% of the area that a step relabels.
 CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& labels,
-                            const CleanupOptions& opt = {});
+                            const CleanupOptions& opt = {}, const Hooks& hooks = {});
 
 /// Structure of the chart graph and its problems.
 struct ChartReport {
