@@ -73,6 +73,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // Surface mode: a few triangles still folded in their chart's plane. Edge flips inside a chart
   // (same vertices, another triangulation); then collapses of the folded triangles' edges (two
   // triangles fewer, one vertex merged into a neighbour) and a new realization, a few rounds.
+  constexpr int kStallRounds = 5;
   auto repair_surface = [&] {
     if (e.realized.success || e.realized.misoriented_faces == 0 ||
         e.realized.misoriented_faces > opt.max_flip_faces || e.realized.degenerate_border_edges > 0 ||
@@ -82,7 +83,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     std::vector<int> L = e.labels;
     std::vector<int> merged(rest.rows(), -1);
     RealizeResult r = e.realized;
-    int flips = 0, collapses = 0;
+    int flips = 0, collapses = 0, relabels = 0, relabelled = 0, stall = 0;
+    int fewest = std::numeric_limits<int>::max();
+    std::map<std::array<int, 3>, std::set<int>> tried_labels;  // per triangle (sorted vertices)
     // Merged vertices sit on the vertex they were merged into (followed through later merges).
     auto place_merged = [&](MatX3d& X) {
       for (int v = 0; v < static_cast<int>(merged.size()); ++v) {
@@ -104,10 +107,54 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
             hooks.debug("folded triangle (" + std::to_string(F(t, 0)) + " " + std::to_string(F(t, 1)) + " " +
                         std::to_string(F(t, 2)) + ") label " + label_name(L[t]));
       }
-      const int c = collapse_folded_edges(rest, r.X, F, L, merged);
+      // Collapses that no longer reduce the folded triangles (kStallRounds rounds) give way to a
+      // relabelling (fandisk, `--surface --quads 724`: 2 folded triangles for 3 rounds, then none).
+      stall = r.misoriented_faces >= fewest ? stall + 1 : 0;
+      fewest = std::min(fewest, r.misoriented_faces);
+      const bool relabel_first = stall >= kStallRounds && relabels < opt.repair_relabels;
+      int c = relabel_first ? -2 : collapse_folded_edges(rest, r.X, F, L, merged);
+      if ((c == 0 || c == -2) && relabels < opt.repair_relabels) {
+        // Collapses exhausted or stalled: the folded triangles take the most frequent label of
+        // their edge neighbours (then of the triangles around their vertices) that they have not
+        // had yet in this repair (humanoid: a corner triangle went back and forth between +X and
+        // -Y, neither of which realizes); the labels are cleaned again, and the layout is realized
+        // again from here (blub: 12 charts realized this way).
+        const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
+        const MatX3i NF = face_adjacency(F);
+        std::vector<std::vector<int>> around(deformed.rows());
+        for (int t = 0; t < F.rows(); ++t)
+          for (int j = 0; j < 3; ++j) around[F(t, j)].push_back(t);
+        std::vector<int> next = L;
+        int changed_here = 0;
+        for (int t = 0; t < F.rows(); ++t) {
+          if (faces_label(r.X, F(t, 0), F(t, 1), F(t, 2), L[t], diag)) continue;
+          std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
+          std::sort(key.begin(), key.end());
+          auto& tried = tried_labels[key];
+          tried.insert(L[t]);
+          int votes[6] = {0, 0, 0, 0, 0, 0};
+          for (int k = 0; k < 3; ++k)
+            if (NF(t, k) >= 0) votes[L[NF(t, k)]] += 1000;
+          for (int j = 0; j < 3; ++j)
+            for (int u : around[F(t, j)]) votes[L[u]] += 1;
+          for (int l : tried) votes[l] = 0;
+          const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
+          if (votes[best] > 0) next[t] = best, ++changed_here;
+        }
+        cleanup_labels(deformed, F, next, opt.cleanup, hooks);
+        if (next != L && check_charts(F, static_cast<int>(deformed.rows()), next).charts >= e.charts.charts / 2) {
+          ++relabels;
+          relabelled += changed_here;
+          L = std::move(next);
+          c = -1;
+          hooks.debug("relabelling the folded triangles of the collapsed layout; realizing again");
+        }
+      }
+      if (c == -2) c = collapse_folded_edges(rest, r.X, F, L, merged);
+      else if (c == -1) stall = 0;
       if (c == 0) break;
-      collapses += c;
-      hooks.debug("collapsing " + std::to_string(c) + " edges of folded triangles; realizing again");
+      collapses += std::max(c, 0);
+      if (c > 0) hooks.debug("collapsing " + std::to_string(c) + " edges of folded triangles; realizing again");
       // From the layout at hand with the merged vertices on their partners (it keeps the planes:
       // the kept vertex gains none), untangled locally. (Realizing from the three starts again
       // did no better on fandisk and rocker, at the cost of a full realization per round.)
@@ -130,6 +177,23 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         r.failure.clear();
         r.arap = deform::surface_arap_energy(r.X, F, deform::SurfaceArapRest::build(rest, F), 1.0, nullptr, nullptr);
         r.isometric = isometric_distortion_surface(rest, r.X, F);
+      }
+      if (relabels > 0) {
+        // The input triangles that the collapses left as they were take their repaired labels
+        // (labels.txt); e.charts describes the repaired layout.
+        std::map<std::array<int, 3>, int> row_of;
+        for (int t = 0; t < B.rows(); ++t) {
+          std::array<int, 3> key{B(t, 0), B(t, 1), B(t, 2)};
+          std::sort(key.begin(), key.end());
+          row_of[key] = t;
+        }
+        for (int t = 0; t < F.rows(); ++t) {
+          std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
+          std::sort(key.begin(), key.end());
+          if (auto it = row_of.find(key); it != row_of.end()) e.labels[it->second] = L[t];
+        }
+        e.charts = check_charts(F, static_cast<int>(deformed.rows()), L);
+        e.cleanup.misoriented += relabelled;
       }
       e.realized = std::move(r);
       e.map_B = std::move(F);
