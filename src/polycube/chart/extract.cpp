@@ -74,6 +74,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   // (same vertices, another triangulation); then collapses of the folded triangles' edges (two
   // triangles fewer, one vertex merged into a neighbour) and a new realization, a few rounds.
   constexpr int kStallRounds = 5;
+  // A triangle's vertices, sorted: its identity across edge flips of other triangles and collapses.
+  auto sorted_key = [](const MatX3i& FF, int t) {
+    std::array<int, 3> key{FF(t, 0), FF(t, 1), FF(t, 2)};
+    std::sort(key.begin(), key.end());
+    return key;
+  };
   auto repair_surface = [&] {
     if (e.realized.success || e.realized.misoriented_faces == 0 ||
         e.realized.misoriented_faces > opt.max_flip_faces || e.realized.degenerate_border_edges > 0 ||
@@ -86,6 +92,42 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     int flips = 0, collapses = 0, relabels = 0, relabelled = 0, stall = 0;
     int fewest = std::numeric_limits<int>::max();
     std::map<std::array<int, 3>, std::set<int>> tried_labels;  // per triangle (sorted vertices)
+    // Collapses exhausted or stalled: the folded triangles take the most frequent label of their
+    // edge neighbours (then of the triangles around their vertices) that they have not had yet in
+    // this repair (humanoid: a corner triangle went back and forth between +X and -Y, neither of
+    // which realizes); the labels are cleaned again, and the layout is realized again from here
+    // (blub: 12 charts realized this way). False when that changes nothing or the cleanup loses
+    // over half the charts.
+    auto relabel_folded = [&](const RealizeResult& rr, const MatX3i& FF, std::vector<int>& LL) {
+      const double diag = (rr.X.colwise().maxCoeff() - rr.X.colwise().minCoeff()).norm();
+      const MatX3i NF = face_adjacency(FF);
+      std::vector<std::vector<int>> around(deformed.rows());
+      for (int t = 0; t < FF.rows(); ++t)
+        for (int j = 0; j < 3; ++j) around[FF(t, j)].push_back(t);
+      std::vector<int> next = LL;
+      int changed_here = 0;
+      for (int t = 0; t < FF.rows(); ++t) {
+        if (faces_label(rr.X, FF(t, 0), FF(t, 1), FF(t, 2), LL[t], diag)) continue;
+        auto& tried = tried_labels[sorted_key(FF, t)];
+        tried.insert(LL[t]);
+        int votes[6] = {0, 0, 0, 0, 0, 0};
+        for (int k = 0; k < 3; ++k)
+          if (NF(t, k) >= 0) votes[LL[NF(t, k)]] += 1000;
+        for (int j = 0; j < 3; ++j)
+          for (int u : around[FF(t, j)]) votes[LL[u]] += 1;
+        for (int l : tried) votes[l] = 0;
+        const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
+        if (votes[best] > 0) next[t] = best, ++changed_here;
+      }
+      cleanup_labels(deformed, FF, next, opt.cleanup, hooks);
+      if (next == LL || check_charts(FF, static_cast<int>(deformed.rows()), next).charts < e.charts.charts / 2)
+        return false;
+      ++relabels;
+      relabelled += changed_here;
+      LL = std::move(next);
+      hooks.debug("relabelling the folded triangles of the collapsed layout; realizing again");
+      return true;
+    };
     // Merged vertices sit on the vertex they were merged into (followed through later merges).
     auto place_merged = [&](MatX3d& X) {
       for (int v = 0; v < static_cast<int>(merged.size()); ++v) {
@@ -112,48 +154,12 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
       stall = r.misoriented_faces >= fewest ? stall + 1 : 0;
       fewest = std::min(fewest, r.misoriented_faces);
       const bool relabel_first = stall >= kStallRounds && relabels < opt.repair_relabels;
-      int c = relabel_first ? -2 : collapse_folded_edges(rest, r.X, F, L, merged);
-      if ((c == 0 || c == -2) && relabels < opt.repair_relabels) {
-        // Collapses exhausted or stalled: the folded triangles take the most frequent label of
-        // their edge neighbours (then of the triangles around their vertices) that they have not
-        // had yet in this repair (humanoid: a corner triangle went back and forth between +X and
-        // -Y, neither of which realizes); the labels are cleaned again, and the layout is realized
-        // again from here (blub: 12 charts realized this way).
-        const double diag = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).norm();
-        const MatX3i NF = face_adjacency(F);
-        std::vector<std::vector<int>> around(deformed.rows());
-        for (int t = 0; t < F.rows(); ++t)
-          for (int j = 0; j < 3; ++j) around[F(t, j)].push_back(t);
-        std::vector<int> next = L;
-        int changed_here = 0;
-        for (int t = 0; t < F.rows(); ++t) {
-          if (faces_label(r.X, F(t, 0), F(t, 1), F(t, 2), L[t], diag)) continue;
-          std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
-          std::sort(key.begin(), key.end());
-          auto& tried = tried_labels[key];
-          tried.insert(L[t]);
-          int votes[6] = {0, 0, 0, 0, 0, 0};
-          for (int k = 0; k < 3; ++k)
-            if (NF(t, k) >= 0) votes[L[NF(t, k)]] += 1000;
-          for (int j = 0; j < 3; ++j)
-            for (int u : around[F(t, j)]) votes[L[u]] += 1;
-          for (int l : tried) votes[l] = 0;
-          const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
-          if (votes[best] > 0) next[t] = best, ++changed_here;
-        }
-        cleanup_labels(deformed, F, next, opt.cleanup, hooks);
-        if (next != L && check_charts(F, static_cast<int>(deformed.rows()), next).charts >= e.charts.charts / 2) {
-          ++relabels;
-          relabelled += changed_here;
-          L = std::move(next);
-          c = -1;
-          hooks.debug("relabelling the folded triangles of the collapsed layout; realizing again");
-        }
-      }
-      if (c == -2) c = collapse_folded_edges(rest, r.X, F, L, merged);
-      else if (c == -1) stall = 0;
-      if (c == 0) break;
-      collapses += std::max(c, 0);
+      int c = relabel_first ? 0 : collapse_folded_edges(rest, r.X, F, L, merged);
+      const bool relabelled_now = c == 0 && relabels < opt.repair_relabels && relabel_folded(r, F, L);
+      if (relabelled_now) stall = 0;
+      else if (relabel_first) c = collapse_folded_edges(rest, r.X, F, L, merged);
+      if (c == 0 && !relabelled_now) break;
+      collapses += c;
       if (c > 0) hooks.debug("collapsing " + std::to_string(c) + " edges of folded triangles; realizing again");
       // From the layout at hand with the merged vertices on their partners (it keeps the planes:
       // the kept vertex gains none), untangled locally. (Realizing from the three starts again
@@ -182,16 +188,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
         // The input triangles that the collapses left as they were take their repaired labels
         // (labels.txt); e.charts describes the repaired layout.
         std::map<std::array<int, 3>, int> row_of;
-        for (int t = 0; t < B.rows(); ++t) {
-          std::array<int, 3> key{B(t, 0), B(t, 1), B(t, 2)};
-          std::sort(key.begin(), key.end());
-          row_of[key] = t;
-        }
-        for (int t = 0; t < F.rows(); ++t) {
-          std::array<int, 3> key{F(t, 0), F(t, 1), F(t, 2)};
-          std::sort(key.begin(), key.end());
-          if (auto it = row_of.find(key); it != row_of.end()) e.labels[it->second] = L[t];
-        }
+        for (int t = 0; t < B.rows(); ++t) row_of[sorted_key(B, t)] = t;
+        for (int t = 0; t < F.rows(); ++t)
+          if (auto it = row_of.find(sorted_key(F, t)); it != row_of.end()) e.labels[it->second] = L[t];
         e.charts = check_charts(F, static_cast<int>(deformed.rows()), L);
         e.cleanup.misoriented += relabelled;
       }

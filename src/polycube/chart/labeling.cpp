@@ -215,16 +215,18 @@ int fix_wide_fans(const MatX3d& X, const MatX3i& F, const MatX3i& N, std::vector
 // meeting vertex, of centroid -> vertex, projected off the charts' axis). require_fold: only where
 // both sides face their labels at the meeting vertices (otherwise the contact is a vertex or a
 // mislabelled patch, and the caller decides). Returns the triangles relabelled.
-int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const std::vector<std::vector<int>>& vcharts,
-             int small, bool require_fold, std::vector<int>& labels) {
+using VertexCharts = std::vector<std::vector<std::pair<int, int>>>;  // vertex_charts
+
+int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCharts& vcharts, int small,
+             bool require_fold, std::vector<int>& labels) {
   const int axis = axis_of(c.label[small]);
   const int nv = static_cast<int>(X.rows());
   std::vector<char> meeting(nv, 0);
   for (int v = 0; v < nv; ++v) {
     const auto& l = vcharts[v];
-    const bool has_small = std::find(l.begin(), l.end(), small) != l.end();
+    const bool has_small = std::any_of(l.begin(), l.end(), [&](const auto& p) { return p.first == small; });
     const bool has_opposite =
-        std::any_of(l.begin(), l.end(), [&](int ch) { return c.label[ch] == (c.label[small] ^ 1); });
+        std::any_of(l.begin(), l.end(), [&](const auto& p) { return c.label[p.first] == (c.label[small] ^ 1); });
     meeting[v] = has_small && has_opposite;
   }
   // Only a fold: the triangles of both sides at the meeting vertices face their own labels (a
@@ -261,25 +263,14 @@ int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const std::vecto
   return changed;
 }
 
-// Per vertex: the charts of its triangles.
-std::vector<std::vector<int>> charts_at_vertices(const MatX3i& F, const Charts& c, int nv) {
-  std::vector<std::vector<int>> vc(nv);
-  for (int f = 0; f < F.rows(); ++f)
-    for (int j = 0; j < 3; ++j) {
-      auto& l = vc[F(f, j)];
-      if (std::find(l.begin(), l.end(), c.of_face[f]) == l.end()) l.push_back(c.of_face[f]);
-    }
-  return vc;
-}
-
 // Charts meeting a chart of the opposite label (along an edge or at a vertex), each the smaller
 // of such a pair, by increasing area (equal areas: in the order the vertices first show them).
-std::vector<int> smaller_of_opposite_pairs(const Charts& c, const std::vector<std::vector<int>>& vcharts) {
+std::vector<int> smaller_of_opposite_pairs(const Charts& c, const VertexCharts& vcharts) {
   std::vector<int> out;
   std::vector<char> seen(c.count(), 0);
   for (const auto& l : vcharts)
-    for (int a : l)
-      for (int b : l)
+    for (auto [a, fa] : l)
+      for (auto [b, fb] : l)
         if (c.label[a] == (c.label[b] ^ 1)) {
           const int small = c.area[a] <= c.area[b] ? a : b;
           if (!seen[small]) out.push_back(small);
@@ -361,14 +352,17 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
       s.degenerate += d;
       changed |= d > 0;
     }
+    // The charts of the labels after steps 1-2; steps 3 and 4 below change labels only as the
+    // last thing they do, so each sees these charts as they are.
+    const Charts c = build_charts(X, F, labels);
+    const VertexCharts vcharts =
+        opt.separate_opposite ? vertex_charts(F, c, static_cast<int>(X.rows())) : VertexCharts{};
     bool rim_opened = false;
     if (opt.separate_opposite && s.rims < opt.max_rims) {
       // Step 4 for folds, before the low-degree removal: a large chart meeting its opposite along
       // a fold gets a rim (open_rim). Removing low-degree charts first could strip the fold of
       // what surrounds it (a thin wedge's two triangular ends have degree 3, and their removal
       // cascades until one chart is left).
-      const Charts c = build_charts(X, F, labels);
-      const auto vcharts = charts_at_vertices(F, c, static_cast<int>(X.rows()));
       const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
       for (int small : smaller_of_opposite_pairs(c, vcharts)) {
         if (!(c.area[small] > opt.rim_above * total)) continue;
@@ -384,7 +378,6 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
     }
     if (opt.remove_low_degree && !rim_opened) {
       // Remove the smallest chart of the lowest degree <= 3, then start over.
-      const Charts c = build_charts(X, F, labels);
       // Degree 1: the surrounding chart; degree 2 and 3: the neighbour with the longest border,
       // avoiding, when another choice exists, the opposite label and a label whose opposite is
       // another neighbour's (the merged chart would meet it). safe: a neighbour of neither kind.
@@ -432,8 +425,6 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
     if (!changed && opt.separate_opposite) {
       // Opposite charts meeting (along an edge or at a vertex) would give the polycube zero
       // thickness: the smaller one takes the label of its longest-bordered non-opposite neighbour.
-      const Charts c = build_charts(X, F, labels);
-      const auto vcharts = charts_at_vertices(F, c, static_cast<int>(X.rows()));
       const auto pairs = smaller_of_opposite_pairs(c, vcharts);
       int worst = pairs.empty() ? -1 : pairs.front();
       // A large chart that faces its label (where it meets its opposite only at a vertex or along
