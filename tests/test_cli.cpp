@@ -1,6 +1,7 @@
 // End-to-end runs of the command-line tool.
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 
 #include <map>
@@ -391,6 +392,22 @@ TEST(Cli, QuadMeshOfTheSphere) {
   const json m = json::parse(r.output);
   EXPECT_NEAR(m["quad"]["sj_min"].get<double>(), q["sj_min"].get<double>(), 1e-12);
   EXPECT_NEAR(m["quad"]["hausdorff_rel"].get<double>(), q["hausdorff_rel"].get<double>(), 1e-12);
+  // The same quads as OBJ polygons (what other quad meshers write) measure the same.
+  r = run_cli("measure " + out + "/quad.obj --ref " + out + "/surface.mesh");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json mo = json::parse(r.output);
+  for (const char* k : {"count", "inverted", "below_0_5"}) EXPECT_EQ(mo["quad"][k], q[k]) << k;
+  for (const char* k : {"sj_min", "sj_mean", "sj_max", "hausdorff_rel"})
+    EXPECT_NEAR(mo["quad"][k].get<double>(), q[k].get<double>(), 1e-9) << k;
+  // A triangle in it: named, and no figures.
+  {
+    std::ifstream in(out + "/quad.obj");
+    std::ofstream bad(out + "/mixed.obj");
+    bad << in.rdbuf() << "f 1 2 3\n";
+  }
+  r = run_cli("measure " + out + "/mixed.obj");
+  EXPECT_EQ(r.code, 4) << r.output;
+  EXPECT_NE(r.output.find("is not a quadrilateral"), std::string::npos) << r.output;
   // The quads were fitted to the sphere: its points came closer, the worst quad did not drop.
   EXPECT_GT(q["fit"]["moves"].get<int>(), 0);
   EXPECT_LE(q["fit"]["max_distance_after_rel"].get<double>(), q["fit"]["max_distance_before_rel"].get<double>());

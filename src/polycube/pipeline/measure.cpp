@@ -1,5 +1,8 @@
 #include "polycube/pipeline/measure.h"
 
+#include <algorithm>
+#include <vector>
+
 #include "polycube/core/error.h"
 #include "polycube/hex/quality.h"
 #include "polycube/io/readers.h"
@@ -26,6 +29,40 @@ SurfaceMesh surface_of(const MeshData& m) {
   return s;
 }
 
+// Quads of a surface file whose polygons were triangulated on reading (OBJ, OFF, PLY): every file
+// face must have given two triangles sharing a diagonal, (u, v, p) and (v, u, r): the quad u r v p,
+// started at the polygon's first vertex (the first of its first triangle).
+// Any other face makes the file no quad mesh; the first is named.
+MatX4i quads_of_polygons(const MeshData& m) {
+  const int nf = static_cast<int>(m.F.rows());
+  int faces = 0;
+  for (int f = 0; f < nf; ++f) faces = std::max(faces, m.face_source[f] + 1);
+  std::vector<std::vector<int>> tris(faces);
+  for (int f = 0; f < nf; ++f) tris[m.face_source[f]].push_back(f);
+  MatX4i Q(faces, 4);
+  for (int s = 0; s < faces; ++s) {
+    const auto& t = tris[s];
+    bool found = false;
+    for (int i = 0; t.size() == 2 && i < 3 && !found; ++i) {
+      const int u = m.F(t[0], i), v = m.F(t[0], (i + 1) % 3), p = m.F(t[0], (i + 2) % 3);
+      for (int k = 0; k < 3 && !found; ++k)
+        if (m.F(t[1], k) == v && m.F(t[1], (k + 1) % 3) == u) {
+          const int c[4] = {u, m.F(t[1], (k + 2) % 3), v, p};
+          int r = 0;  // the polygon's first vertex starts its first triangle (io::triangulate_polygon)
+          while (c[r] != m.F(t[0], 0)) ++r;
+          for (int j = 0; j < 4; ++j) Q(s, j) = c[(r + j) % 4];
+          found = true;
+        }
+    }
+    if (!found)
+      throw Error(ErrorKind::InvalidMesh, m.path + ": not a quad mesh: " +
+                                              (t.empty() ? "face " + std::to_string(s + 1) : m.face_where(t[0])) +
+                                              " is not a quadrilateral (" + std::to_string(t.size()) +
+                                              " triangles on reading; measure takes hexahedra or quadrilaterals)");
+  }
+  return Q;
+}
+
 }  // namespace
 
 void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key) {
@@ -42,7 +79,14 @@ void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, cons
 nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
   Stopwatch sw;
   hooks.info("reading " + opt.path);
-  const MeshData m = io::read_mesh(opt.path, {}, true);
+  MeshData m = io::read_mesh(opt.path, {}, true);
+  // Surface formats store quads as polygons, triangulated on reading: take them back.
+  const bool polygon_file = m.format == "obj" || m.format == "off" || m.format.rfind("ply", 0) == 0;
+  if (m.H.rows() == 0 && m.Q.rows() == 0 && m.T.rows() == 0 && polygon_file && m.F.rows() > 1 &&
+      !m.face_source.empty() && m.face_source[0] == m.face_source[1]) {
+    m.Q = quads_of_polygons(m);
+    m.F.resize(0, 3);
+  }
   if (m.H.rows() == 0 && m.Q.rows() == 0)
     throw Error(ErrorKind::InvalidMesh, opt.path + ": no hexahedra or quadrilaterals to measure");
   const bool quads = m.H.rows() == 0;
