@@ -294,6 +294,60 @@ TEST(SurfaceFit, AnUnevenRingOnATubeEvensOutToTheBestChords) {
   EXPECT_GT(quad::quad_quality(r.V, r.Q).sj_min, 0.5);
 }
 
+TEST(SurfaceFit, FocusedRoundsFinishWhatFewFullRoundsLeave) {
+  const SurfaceMesh s = tube(360, 4);
+  const geometry::TriangleTree tree(s.V, s.F);
+  const double best = 1 - std::cos(22.5 * M_PI / 180);
+  auto run = [&](int rounds, int focus) {
+    Ring r = uneven_ring();
+    geometry::SurfaceFitOptions o;
+    o.rounds = rounds;
+    o.focus_rounds = focus;
+    o.quality_floor = 0.5;
+    return geometry::fit_to_surface(r.V, r.Q, s, tree, std::vector<char>(16, 1), nullptr,
+                                    [&](int v) { return r.worst(v); }, o);
+  };
+  const geometry::SurfaceFitStats few = run(2, 0), focused = run(2, 60);
+  EXPECT_EQ(few.focus_rounds, 0);
+  EXPECT_GT(focused.focus_rounds, 0);
+  EXPECT_EQ(focused.rounds, 2 + focused.focus_rounds);
+  EXPECT_GT(few.max_after, 1.1 * best);  // two rounds are not enough
+  EXPECT_LT(focused.max_after, 1.1 * best);
+  EXPECT_LT(focused.max_after, few.max_after);
+}
+
+TEST(SurfaceFit, VerticesOnASharpEdgeSlideAlongIt) {
+  // The ring's bottom vertices are not free but slide on the rim circle z = 0 (a sharp edge).
+  const SurfaceMesh s = tube(360, 4);
+  const geometry::TriangleTree tree(s.V, s.F);
+  const double best = 1 - std::cos(22.5 * M_PI / 180);
+  std::vector<char> free_vertex(16, 1);
+  for (int v = 0; v < 8; ++v) free_vertex[v] = 0;
+  auto on_rim = [](int v, const Vec3& x, Vec3& p) {
+    if (v >= 8) return false;
+    const double a = std::atan2(x.y(), x.x());
+    p = Vec3(std::cos(a), std::sin(a), 0);
+    return true;
+  };
+  geometry::SurfaceFitOptions o;
+  o.rounds = 60;
+  o.quality_floor = 0.5;
+  Ring r = uneven_ring();
+  const geometry::SurfaceFitStats st = geometry::fit_to_surface(
+      r.V, r.Q, s, tree, free_vertex, nullptr, [&](int v) { return r.worst(v); }, o, on_rim);
+  EXPECT_LT(st.max_after, 1.1 * best);
+  for (int v = 0; v < 8; ++v) {
+    EXPECT_EQ(r.V(v, 2), 0.0) << v;  // on the rim
+    EXPECT_NEAR(std::hypot(r.V(v, 0), r.V(v, 1)), 1, 1e-12) << v;
+  }
+  // Without the slide the bottom stays where it was and the chords stay uneven there.
+  Ring k = uneven_ring();
+  const geometry::SurfaceFitStats kept =
+      geometry::fit_to_surface(k.V, k.Q, s, tree, free_vertex, nullptr, [&](int v) { return k.worst(v); }, o);
+  for (int v = 0; v < 8; ++v) EXPECT_EQ((k.V.row(v) - uneven_ring().V.row(v)).norm(), 0.0) << v;
+  EXPECT_GT(kept.max_after, st.max_after);
+}
+
 TEST(SurfaceFit, NoMoveTakesAQuadBelowTheFloor) {
   const SurfaceMesh s = tube(360, 4);
   const geometry::TriangleTree tree(s.V, s.F);

@@ -28,7 +28,8 @@ struct Near {
 
 SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
                                const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
-                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt) {
+                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt,
+                               const std::function<bool(int, const Vec3&, Vec3&)>& slide) {
   SurfaceFitStats st;
   const int n = static_cast<int>(V.rows());
   const int nq = static_cast<int>(Q.rows());
@@ -81,6 +82,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       }
     return best;
   };
+  std::vector<double> sample_dist(ns, 0.0);
   auto measure = [&](double& mx, double& mean, std::vector<int>* owner) {
     const TriangleTree qt(V, QT);
     mx = mean = 0;
@@ -88,20 +90,74 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     for (int s = 0; s < ns; ++s) {
       const ClosestHit h = qt.closest(samples[s]);
       const double d = std::sqrt(h.dist2);
+      sample_dist[s] = d;
       mx = std::max(mx, d);
       mean += d;
       if (owner) (*owner)[s] = h.face / 2;
     }
     mean /= std::max(1, ns);
   };
+  // Largest distance to the surface of the centre and edge midpoints of quad q (the other side).
+  auto quad_gap = [&](int q) {
+    double m = 0;
+    for (int k = 0; k < 5; ++k) {
+      static constexpr double uv[5][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
+      const double u = uv[k][0], w = uv[k][1];
+      const Vec3 x = (1 - u) * (1 - w) * V.row(Q(q, 0)).transpose() + u * (1 - w) * V.row(Q(q, 1)).transpose() +
+                     u * w * V.row(Q(q, 2)).transpose() + (1 - u) * w * V.row(Q(q, 3)).transpose();
+      m = std::max(m, tree.closest(x).dist2);
+    }
+    return std::sqrt(m);
+  };
 
   std::vector<int> owner;
   measure(st.max_before, st.mean_before, &owner);
   const double p_exp = opt.power;
-  for (int round = 0; round < opt.rounds; ++round) {
+  // Focused rounds (after the full ones): only the vertices of quads within focus_ratio of the
+  // largest distance, on either side, move.
+  std::vector<char> active;
+  int full_rounds_done = 0, focus_rounds_done = 0, focus_stalled = 0;
+  double best_max = st.max_before;
+  for (int round = 0;; ++round) {
+    const bool focus = full_rounds_done >= opt.rounds;
+    if (focus && (focus_rounds_done >= opt.focus_rounds || opt.rounds == 0)) break;
     if (round > 0) {
       double mx, mean;
       measure(mx, mean, &owner);
+      if (focus) {
+        if (mx < best_max * (1 - 1e-3)) {
+          focus_stalled = 0;
+        } else if (++focus_stalled >= 3) {
+          break;
+        }
+        best_max = std::min(best_max, mx);
+      }
+    }
+    if (focus) {
+      double mx = 0;
+      for (int s = 0; s < ns; ++s) mx = std::max(mx, sample_dist[s]);
+      std::vector<double> gap(nq);
+      for (int q = 0; q < nq; ++q) mx = std::max(mx, gap[q] = opt.two_sided ? quad_gap(q) : 0.0);
+      active.assign(n, 0);
+      auto mark = [&](int q) {
+        for (int j = 0; j < 4; ++j) active[Q(q, j)] = 1;
+      };
+      for (int s = 0; s < ns; ++s)
+        if (sample_dist[s] >= opt.focus_ratio * mx) mark(owner[s]);
+      for (int q = 0; q < nq; ++q)
+        if (gap[q] >= opt.focus_ratio * mx) mark(q);
+      // and their neighbours: a far sample's quad may need its neighbours to move first
+      std::vector<char> grown = active;
+      for (int q = 0; q < nq; ++q) {
+        bool any = false;
+        for (int j = 0; j < 4; ++j) any = any || active[Q(q, j)];
+        if (any)
+          for (int j = 0; j < 4; ++j) grown[Q(q, j)] = 1;
+      }
+      active.swap(grown);
+      ++focus_rounds_done;
+    } else {
+      ++full_rounds_done;
     }
     ++st.rounds;
     // Samples per quad.
@@ -115,7 +171,11 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     int moves = 0;
     std::vector<int> S;
     for (int v = 0; v < n; ++v) {
-      if (vq[v].empty() || v >= static_cast<int>(free_vertex.size()) || !free_vertex[v]) continue;
+      if (vq[v].empty()) continue;
+      const bool is_free = v < static_cast<int>(free_vertex.size()) && free_vertex[v];
+      Vec3 on_edge;
+      if (!is_free && !(slide && slide(v, V.row(v).transpose(), on_edge))) continue;
+      if (focus && !active[v]) continue;
       S.clear();
       for (int q : vq[v]) S.insert(S.end(), list.begin() + start[q], list.begin() + start[q + 1]);
       if (S.empty()) continue;
@@ -179,7 +239,12 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       const double q0 = worst(v);
       const Vec3 x = V.row(v).transpose();
       for (double t : {1.0, 0.5, 0.25}) {
-        const Vec3 p = tree.closest(x + t * step, &nrm, patch_of_face, patch[v]).point;
+        Vec3 p;
+        if (is_free) {
+          p = tree.closest(x + t * step, &nrm, patch_of_face, patch[v]).point;
+        } else if (!slide(v, x + t * step, p)) {
+          continue;
+        }
         V.row(v) = p.transpose();
         double e1 = 0, m1 = 0;
         for (int s : S) {
@@ -196,7 +261,12 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       }
     }
     st.moves += moves;
-    if (moves == 0) break;
+    if (focus) {
+      st.focus_rounds = focus_rounds_done;
+      if (moves == 0) break;
+    } else if (moves == 0) {
+      full_rounds_done = opt.rounds;  // converged: on to the focused rounds
+    }
   }
   measure(st.max_after, st.mean_after, nullptr);
   return st;

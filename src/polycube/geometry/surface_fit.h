@@ -30,10 +30,18 @@ struct SurfaceFitOptions {
   /// Also fit the quads to the surface: the centre and edge midpoints of a vertex's quads, measured
   /// to the surface, join its energy and its largest distance (the other side of the Hausdorff distance).
   bool two_sided = true;
+  /// Then up to this many focused rounds: only the vertices of the quads that hold the largest
+  /// distances (a sample of the surface, or a quad point, within focus_ratio of the largest) and of
+  /// their neighbour quads move; they stop after 3 rounds without a 0.1% smaller largest distance.
+  /// The largest distance (the Hausdorff distance) is set by a few places the full rounds reach
+  /// slowly (rocker, 8828 quads: 1.79e-3 after 8 full rounds, 1.64e-3 after 20).
+  int focus_rounds = 60;
+  double focus_ratio = 0.7;
 };
 
 struct SurfaceFitStats {
-  int rounds = 0;
+  int rounds = 0;        ///< all rounds, focused ones included
+  int focus_rounds = 0;  ///< of those, focused rounds
   int moves = 0;
   double floor = 0;                        ///< the quality floor used
   double max_before = 0, max_after = 0;    ///< largest sample-to-quads distance before and after
@@ -44,8 +52,12 @@ struct SurfaceFitStats {
 /// v may move (a vertex of Q not on a feature). target/tree: the surface and its tree; with
 /// patch_of_face (one id per target triangle), a vertex stays on the smooth patch it starts on.
 /// worst(v): the worst element quality around v at the current V (quads or hexes).
+/// slide (optional): for a vertex that is not free, slide(v, x, p) sets p to the point of v's sharp
+/// edge nearest x and returns true when v may slide along that edge (false: v stays, e.g. at a
+/// corner of the sharp edges); such vertices move like free ones, projected on their edge.
 SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
                                const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
-                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt = {});
+                               const std::function<double(int)>& worst, const SurfaceFitOptions& opt = {},
+                               const std::function<bool(int, const Vec3&, Vec3&)>& slide = {});
 
 }  // namespace polycube::geometry

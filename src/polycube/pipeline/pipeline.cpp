@@ -61,6 +61,7 @@ namespace {
 /// The fitting to the surface (geometry/surface_fit.h), distances relative to the bbox diagonal.
 json fit_json(const geometry::SurfaceFitStats& f, double diag) {
   return {{"rounds", f.rounds},
+          {"focus_rounds", f.focus_rounds},
           {"moves", f.moves},
           {"quality_floor", f.floor},
           {"max_distance_before_rel", f.max_before / diag},

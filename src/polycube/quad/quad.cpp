@@ -256,7 +256,12 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
       for (const geometry::FeatureCaptureStats::Run& run : fc.captured_runs) {
         double m = 1e300;
         for (int v : run.vertices) m = std::min(m, worst(v));
-        if (m >= std::min(kCaptureMinQuality, base_min) && farthest(now_tree, run) < farthest(base_tree, run)) {
+        const double far_now = farthest(now_tree, run), far_base = farthest(base_tree, run);
+        const bool keep = m >= std::min(kCaptureMinQuality, base_min) && far_now < far_base;
+        hooks.debug("crease run of " + std::to_string(run.vertices.size()) + " quad vertices: worst quad " +
+                    std::to_string(m) + ", farthest input " + std::to_string(far_now) + " (" +
+                    std::to_string(far_base) + " without): " + (keep ? "kept" : "undone"));
+        if (keep) {
           ++r.crease_captured;
           r.crease_moved += static_cast<int>(run.vertices.size());
           continue;
@@ -301,7 +306,16 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
   if (opt.fit.rounds > 0) {
     std::vector<char> free_vertex(n, 0);
     for (int v = 0; v < n; ++v) free_vertex[v] = !fixed[v] && (pinned.empty() || !pinned[v]);
-    r.fit = geometry::fit_to_surface(r.V, r.Q, target, tree, free_vertex, &patch_of_face, worst, opt.fit);
+    // Vertices on sharp edges slide along them (not at corners of the sharp edges, and only
+    // between two neighbours on the same edge, as in the smoothing).
+    auto slide = [&](int v, const Vec3& x, Vec3& p) {
+      if (!pinned.empty() && pinned[v]) return false;
+      int a, b;
+      if (!slide_ends(v, a, b)) return false;
+      return geometry::closest_on_sharp_edge(target, sharp, adj, tree, x, 0.5 * elen, p);
+    };
+    r.fit = geometry::fit_to_surface(r.V, r.Q, target, tree, free_vertex, &patch_of_face, worst, opt.fit,
+                                     opt.fit_slide ? std::function<bool(int, const Vec3&, Vec3&)>(slide) : nullptr);
   }
   for (int v = 0; v < n; ++v) r.feature_vertices += fixed[v];
   r.quality = quad_quality(r.V, r.Q);

@@ -43,6 +43,8 @@ struct QuadOptions {
   /// Last, the free vertices slide on the surface so that it comes closer to the quads
   /// (geometry/surface_fit.h; rounds = 0: off).
   geometry::SurfaceFitOptions fit;
+  /// In the fitting, vertices on sharp edges slide along them too (those the smoothing may slide).
+  bool fit_slide = true;
 };
 
 struct QuadResult {
