@@ -142,6 +142,13 @@ int main(int argc, char** argv) {
                  "Polycube deformation: weight of the log barrier on tet volumes, or on triangle areas in surface "
                  "mode (0 = off, as in the paper)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--thickness", d.thickness_weight,
+                 "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "
+                 "apart (0 = off)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--thickness-keep", d.thickness_keep,
+                 "Surface mode: the fraction of their rest thickness thin parts keep at least")
+      ->capture_default_str()->check(CLI::Range(0.01, 0.99));
   app.add_option("--volume-boost", d.volume_boost_factor,
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "
                  "would invert the tet (1 = off)")

@@ -197,6 +197,58 @@ TEST(Energies, AreaBarrierGradientHessianAndKnownValues) {
   EXPECT_TRUE(std::isinf(E(Y, nullptr, nullptr)));
 }
 
+TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
+  // A 1 x 1 x 0.04 plate: the vertices inside its top face see the bottom face 0.04 below them
+  // (well under 5% of the diagonal), and the other way round.
+  const SurfaceMesh plate = grid_box(4, Vec3(0, 0, 0), Vec3(1, 1, 0.04));
+  const double diag = std::sqrt(2.0 + 0.04 * 0.04);
+  const std::vector<ThicknessPair> pairs = thickness_pairs(plate.V, plate.F, 0.05 * diag);
+  int faces = 0;
+  for (int v = 0; v < plate.V.rows(); ++v) faces += plate.V(v, 2) == 0 || plate.V(v, 2) == 0.04;
+  // Every vertex of the top and bottom faces (their rims too: their normals are mostly +-Z); the
+  // side faces' inner vertices look across the whole plate: no pair.
+  ASSERT_EQ(static_cast<int>(pairs.size()), faces);
+  double w = 0;
+  for (const ThicknessPair& p : pairs) {
+    EXPECT_NEAR(p.d0, 0.04, 1e-12);
+    const Vec3 q = p.bary[0] * plate.V.row(plate.F(p.f, 0)) + p.bary[1] * plate.V.row(plate.F(p.f, 1)) +
+                   p.bary[2] * plate.V.row(plate.F(p.f, 2));
+    EXPECT_NEAR(std::abs(q.z() - plate.V(p.v, 2)), 0.04, 1e-12);
+    EXPECT_NEAR(q.x(), plate.V(p.v, 0), 1e-12);
+    w += p.w;
+  }
+  EXPECT_GT(w, 0.5);  // most of the plate's area is its two faces
+  EXPECT_LT(w, 1.0);
+  // Pairs with a larger limit only: a thick box has none under 5%.
+  EXPECT_TRUE(thickness_pairs(grid_box(4).V, grid_box(4).F, 0.05 * std::sqrt(3.0)).empty());
+
+  const double keep = 0.5;
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return thickness_energy(X, plate.F, pairs, keep, 0.7, g, H);
+  };
+  auto squashed = [&](double f) {
+    MatX3d X = plate.V;
+    X.col(2) *= f;
+    return X;
+  };
+  EXPECT_EQ(E(plate.V, nullptr, nullptr), 0.0);                 // at rest
+  EXPECT_EQ(E(squashed(0.6), nullptr, nullptr), 0.0);           // still above half its thickness
+  EXPECT_EQ(crushed_fraction(squashed(0.6), plate.F, pairs, keep), 0.0);
+  // At 30% every pair is at r = 0.3 / 0.5: 0.7 * sum w (r - 1 - log r).
+  const double r = 0.6;
+  EXPECT_NEAR(E(squashed(0.3), nullptr, nullptr), 0.7 * w * (r - 1 - std::log(r)), 1e-12);
+  EXPECT_NEAR(crushed_fraction(squashed(0.3), plate.F, pairs, keep), w, 1e-12);
+  EXPECT_TRUE(std::isinf(E(squashed(0.0), nullptr, nullptr)));  // folded flat
+  // Gradient and Gauss-Newton Hessian in the active range, jittered.
+  MatX3d X = squashed(0.3);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-0.002, 0.002);
+  for (int i = 0; i < X.rows(); ++i)
+    for (int k = 0; k < 3; ++k) X(i, k) += u(rng);
+  expect_gradient(E, X);
+  expect_psd(hessian(E, X));
+}
+
 TEST(Energies, SurfaceArapGradientHessianAndZeroAtRest) {
   Small s = small_mesh();
   SurfaceArapRest rest = SurfaceArapRest::build(s.X0, s.F);

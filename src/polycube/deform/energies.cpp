@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "polycube/core/error.h"
+#include "polycube/geometry/closest_point.h"
 
 namespace polycube::deform {
 
@@ -441,6 +442,80 @@ double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
     const Eigen::Matrix<double, 9, 1> dA = normal_jacobian(xa, xb, xc).transpose() * (N / A);
     if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(-weight * rest.w[f] / A * dA));
     if (hess) hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * rest.w[f] / (A * A) * dA * dA.transpose()));
+  }
+  return weight * E;
+}
+
+std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness) {
+  std::vector<ThicknessPair> pairs;
+  const int n = static_cast<int>(X.rows());
+  std::vector<Vec3> vn(n, Vec3::Zero());
+  std::vector<double> va(n, 0.0);
+  std::vector<std::vector<int>> vf(n);
+  double total = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 N = area_normal(X, F(f, 0), F(f, 1), F(f, 2));
+    total += N.norm();
+    for (int k = 0; k < 3; ++k) {
+      vn[F(f, k)] += N;
+      va[F(f, k)] += N.norm() / 3;
+      vf[F(f, k)].push_back(f);
+    }
+  }
+  if (!(total > 0)) return pairs;
+  const geometry::TriangleTree tree(X, F);
+  for (int v = 0; v < n; ++v) {
+    if (vf[v].empty() || !(vn[v].norm() > 0)) continue;
+    const Vec3 nv = vn[v].normalized(), x = X.row(v).transpose();
+    const Vec3 against = -nv;
+    const geometry::ClosestHit h = tree.closest(x, &against);
+    if (h.face < 0) continue;
+    bool incident = false;
+    for (int k = 0; k < 3; ++k) incident = incident || F(h.face, k) == v;
+    const Vec3 nf = area_normal(X, F(h.face, 0), F(h.face, 1), F(h.face, 2));
+    const Vec3 d = h.point - x;
+    const double d0 = d.norm();
+    if (incident || !(nf.dot(nv) < 0) || !(d0 > 0) || d0 >= max_thickness || d.dot(-nv) < 0.5 * d0) continue;
+    ThicknessPair p;
+    p.v = v;
+    p.f = h.face;
+    p.bary = h.bary;
+    p.d0 = d0;
+    p.w = va[v] / total;
+    pairs.push_back(p);
+  }
+  return pairs;
+}
+
+double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep) {
+  double c = 0;
+  for (const ThicknessPair& p : pairs) {
+    const Vec3 q = p.bary[0] * row(X, F(p.f, 0)) + p.bary[1] * row(X, F(p.f, 1)) + p.bary[2] * row(X, F(p.f, 2));
+    if ((row(X, p.v) - q).norm() < keep * p.d0) c += p.w;
+  }
+  return c;
+}
+
+double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep,
+                        double weight, Eigen::VectorXd* grad, HessianSink* hess) {
+  double E = 0;
+  for (const ThicknessPair& p : pairs) {
+    const int v[4] = {p.v, F(p.f, 0), F(p.f, 1), F(p.f, 2)};
+    const Vec3 q = p.bary[0] * row(X, v[1]) + p.bary[1] * row(X, v[2]) + p.bary[2] * row(X, v[3]);
+    const Vec3 d = row(X, v[0]) - q;
+    const double len = d.norm(), scale = keep * p.d0;
+    const double r = len / scale;
+    if (r >= 1) continue;
+    if (!(r > 0)) return std::numeric_limits<double>::infinity();
+    E += p.w * (r - 1 - std::log(r));
+    if (!grad && !hess) continue;
+    // dr/dx_v = u / scale, dr/dx_fi = -bary_i u / scale, u = d / len.
+    const Vec3 u = d / (len * scale);
+    Eigen::Matrix<double, 12, 1> dr;
+    dr.segment<3>(0) = u;
+    for (int i = 0; i < 3; ++i) dr.segment<3>(3 + 3 * i) = -p.bary[i] * u;
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * p.w * (1 - 1 / r) * dr));
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * p.w / (r * r) * dr * dr.transpose()));
   }
   return weight * E;
 }

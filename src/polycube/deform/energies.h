@@ -107,6 +107,34 @@ double surface_arap_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
 double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
                            Eigen::VectorXd* grad, HessianSink* hess);
 
+/// Thickness of a closed surface (surface mode; not in the paper): a boundary vertex v and the point
+/// across the part below it, on triangle f at barycentric coordinates `bary`, at rest distance d0.
+/// The surface ARAP measures lengths within the surface only: folding a thin part flat (a horn
+/// pressed into a double sheet whose two sides then face +Y and -Y) costs it almost nothing, and the
+/// sheet is crushed when the polycube is realized (spot's horns: 0.2% of their area left). These
+/// pairs keep the two sides of thin parts apart.
+struct ThicknessPair {
+  int v = -1, f = -1;
+  Vec3 bary = Vec3::Zero();
+  double d0 = 0;  ///< rest distance
+  double w = 0;   ///< v's share of the total rest area (a third of its triangles' areas)
+};
+
+/// For each vertex of the closed surface (X, F): the closest point on a triangle facing the other
+/// way (normal against v's), not incident to v, within 60 degrees of v's inward normal and closer
+/// than max_thickness. Vertices with no such point get no pair (thick parts, open surfaces' borders).
+std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness);
+
+/// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with
+/// phi(r) = r - 1 - log r for r < 1 and 0 above: zero while the part keeps at least `keep` of its
+/// rest thickness, +inf when its two sides meet. C1 at r = 1, convex in r. Hessian: Gauss-Newton
+/// (phi'' grad r grad r^T; the term in phi' hess r is negative there and left out).
+/// Area fraction (sum of w) of the pairs whose two sides are closer than keep x their rest distance in X.
+double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep);
+
+double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep,
+                        double weight, Eigen::VectorXd* grad, HessianSink* hess);
+
 /// sum_k sqrt(v_k^2 + eps |v|^2), the smoothed l1 norm of one vector, with (when asked) its gradient
 /// and Hessian in v: exact, and PSD (each term is the norm of a linear map of v).
 double smoothed_l1(const Vec3& v, double eps, Vec3* grad, Eigen::Matrix3d* hess);

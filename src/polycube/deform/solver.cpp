@@ -69,6 +69,7 @@ struct Problem {
   std::vector<std::array<int, 2>> border;
   double border_h = 0;  // length weighting the border edges (see border_l1_energy)
   double area_weight = 0;  // surface mode: weight of the triangle-area barrier (area_barrier_energy)
+  std::vector<ThicknessPair> thickness;  // closed surfaces in surface mode: the two sides of thin parts
 
   double distortion(const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) const {
     return surface ? surface_arap_energy(X, B, srest, 1.0, g, H) : arap_energy(X, T, rest, 1.0, g, H);
@@ -104,6 +105,13 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
   Energies e;
   if (p.surface && p.area_weight > 0) {
     e.volume = area_barrier_energy(X, p.B, p.srest, p.area_weight, g, H);
+    if (!std::isfinite(e.volume)) {
+      e.total = std::numeric_limits<double>::infinity();
+      return e;
+    }
+  }
+  if (!p.thickness.empty()) {
+    e.volume += thickness_energy(X, p.B, p.thickness, p.opt.thickness_keep, p.opt.thickness_weight, g, H);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;
@@ -235,7 +243,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   MatX3d X = (V.rowwise() - centre) / scale;
   POLYCUBE_ASSERT(!any_inverted(X, T), "the tet mesh given to the deformation has inverted tets");
 
-  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, {}, false, {}, {}, 0};
+  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, {}, false, {}, {}, 0, 0, {}};
   if (opt.volume_boost_factor > 1 && p.volume_weight > 0 && T.rows() > 0) p.boost.assign(T.rows(), 1.0);
   double l1 = 0;
   l1_measure(X, B, l1, p.area0);
@@ -252,6 +260,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       // width h = weight * A / L along it, so that the term's share does not depend on the resolution.
       p.border_h = opt.border_weight * p.area0 / std::max(1e-300, len);
     }
+    if (p.border.empty() && opt.thickness_weight > 0) p.thickness = thickness_pairs(X, B, opt.thickness_max);
   }
   // The schedule's measure: sum|N|_1 / sum|N|_2 - 1 over the normals and, on open surfaces, the
   // larger of that and the same over the border edges.
@@ -269,6 +278,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   if (p.surface)
     for (int f = 0; f < B.rows(); ++f) elements.push_back({B(f, 0), B(f, 1), B(f, 2)});
   for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
+  for (const ThicknessPair& tp : p.thickness) elements.push_back({tp.v, B(tp.f, 0), B(tp.f, 1), B(tp.f, 2)});
   SparseSystem sys(static_cast<int>(X.rows()), elements);
   sys.cache_elements(elements);
   // The ARAP Hessian G^T G is constant: assemble it once.
@@ -485,6 +495,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.inverted = measure_tets(res.X, T).inverted;
   res.converged = q < opt.target_quality;
   res.seconds = clock.seconds();
+  res.thickness_pairs = static_cast<int>(p.thickness.size());
   res.factorizations = factorizations;
   res.volume_barrier_weight = p.volume_weight;
   res.boosted_tets = static_cast<int>(std::count_if(p.boost.begin(), p.boost.end(), [](double b) { return b > 1; }));
@@ -501,7 +512,28 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
 
 DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const DeformOptions& opt,
                                         const Hooks& hooks) {
-  return deform(V, MatX4i(0, 4), F, opt, hooks);
+  // First without the thickness barrier (on most shapes no thin part is pressed flat, and the
+  // barrier's elements would only change the factorizations' rounding and so the SQP path); again
+  // with it when thin parts were folded flat.
+  DeformOptions plain = opt;
+  plain.thickness_weight = 0;
+  DeformResult r = deform(V, MatX4i(0, 4), F, plain, hooks);
+  if (!(opt.thickness_weight > 0) || !border_edges(F).empty()) return r;
+  const double diag = (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
+  const std::vector<ThicknessPair> pairs = thickness_pairs(V, F, opt.thickness_max * diag);
+  r.thin_crushed = crushed_fraction(r.X, F, pairs, opt.thickness_keep);
+  if (r.thin_crushed <= opt.thickness_retry_above) return r;
+  {
+    std::ostringstream os;
+    os << "thin parts were pressed flat (" << 100 * r.thin_crushed
+       << "% of the area under half its thickness); deforming again with the thickness barrier";
+    hooks.info(os.str());
+  }
+  const double first_seconds = r.seconds, crushed = r.thin_crushed;
+  r = deform(V, MatX4i(0, 4), F, opt, hooks);
+  r.thin_crushed = crushed;
+  r.seconds += first_seconds;
+  return r;
 }
 
 }  // namespace polycube::deform

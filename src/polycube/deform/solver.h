@@ -40,6 +40,16 @@ struct DeformOptions {
   /// Open surfaces (surface mode): weight of the border l1 term relative to E1. The border edges
   /// weigh like a band of width border_weight x area / border length (see border_l1_energy).
   double border_weight = 1.0;
+  /// Closed surfaces in surface mode: weight of the thickness barrier (thickness_energy; 0 = off),
+  /// which keeps the two sides of thin parts (thinner than thickness_max of the bounding-box
+  /// diagonal) at least thickness_keep of their rest distance apart, so that thin parts are not
+  /// folded flat into double sheets (the surface ARAP does not see folds).
+  double thickness_weight = 1.0;
+  double thickness_keep = 0.5;
+  double thickness_max = 0.05;
+  /// The surface is deformed without the barrier first, and again with it when the pairs pressed
+  /// under thickness_keep of their rest distance carry more than this fraction of the area.
+  double thickness_retry_above = 1e-3;
   /// Surface mode starts at alpha0 times this: the surface ARAP resists less than the volumetric
   /// one, and a sphere of 2048 triangles folded into 19 charts from 0.05 (6 from 0.01, with a
   /// lower distortion, 0.066 against 0.10).
@@ -91,6 +101,10 @@ struct DeformResult {
   int factorizations = 0;    ///< sparse Cholesky factorizations made
   double volume_barrier_weight = 0;  ///< final (possibly raised) volume-barrier weight
   int boosted_tets = 0;      ///< tets whose volume barrier was raised (they blocked a full step)
+  int thickness_pairs = 0;   ///< surface mode: vertex pairs across thin parts kept apart (thickness_energy)
+  /// Surface mode: area fraction of the thin parts pressed under thickness_keep of their thickness
+  /// by the deformation without the barrier (above thickness_retry_above: deformed again with it).
+  double thin_crushed = 0;
   bool converged = false;    ///< l1_quality reached target_quality
   double seconds = 0;
   std::vector<IterationRecord> history;
