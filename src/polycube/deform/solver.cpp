@@ -233,7 +233,11 @@ Eigen::Matrix3d best_rotation(const MatX3d& X, const MatX3i& B, double eps) {
 
 namespace {
 
-DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt, const Hooks& hooks) {
+// watch_thickness (surface mode, closed surfaces): after each schedule step, measure how much of the
+// area thin parts pressed under thickness_keep of their thickness carry (res.thin_crushed), and
+// stop once that passes thickness_retry_above.
+DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt, const Hooks& hooks,
+                    bool watch_thickness = false) {
   Stopwatch clock;
   DeformResult res;
   // Normalize: centred, unit bounding-box diagonal.
@@ -262,6 +266,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     }
     if (p.border.empty() && opt.thickness_weight > 0) p.thickness = thickness_pairs(X, B, opt.thickness_max);
   }
+  const std::vector<ThicknessPair> watch =
+      watch_thickness && p.surface && p.border.empty() ? thickness_pairs(X, B, opt.thickness_max)
+                                                       : std::vector<ThicknessPair>{};
   // The schedule's measure: sum|N|_1 / sum|N|_2 - 1 over the normals and, on open surfaces, the
   // larger of that and the same over the border edges.
   // (s, a: sum|N|_1 and the area of Y, from l1_measure.)
@@ -469,6 +476,12 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
          << ", iterations " << total_iterations;
       hooks.debug(os.str());
     }
+    // Without the thickness barrier (first pass of surface mode): stop as soon as thin parts are
+    // pressed flat, the caller deforms again with the barrier.
+    if (!watch.empty()) {
+      res.thin_crushed = crushed_fraction(X, B, watch, opt.thickness_keep);
+      if (res.thin_crushed > opt.thickness_retry_above) break;
+    }
     alpha *= opt.alpha_factor;
     lambda_prev *= opt.alpha_factor;  // the multiplier grows with alpha (E1 dominates the gradient)
     eps = std::max(opt.eps_min, eps / opt.eps_factor);
@@ -515,14 +528,12 @@ DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const 
   // First without the thickness barrier (on most shapes no thin part is pressed flat, and the
   // barrier's elements would only change the factorizations' rounding and so the SQP path); again
   // with it when thin parts were folded flat.
+  // The first pass stops at the end of the schedule step where that shows (spot: after step 8 of 14).
   DeformOptions plain = opt;
   plain.thickness_weight = 0;
-  DeformResult r = deform(V, MatX4i(0, 4), F, plain, hooks);
-  if (!(opt.thickness_weight > 0) || !border_edges(F).empty()) return r;
-  const double diag = (V.colwise().maxCoeff() - V.colwise().minCoeff()).norm();
-  const std::vector<ThicknessPair> pairs = thickness_pairs(V, F, opt.thickness_max * diag);
-  r.thin_crushed = crushed_fraction(r.X, F, pairs, opt.thickness_keep);
-  if (r.thin_crushed <= opt.thickness_retry_above) return r;
+  const bool watch = opt.thickness_weight > 0 && border_edges(F).empty();
+  DeformResult r = deform(V, MatX4i(0, 4), F, plain, hooks, watch);
+  if (!watch || r.thin_crushed <= opt.thickness_retry_above) return r;
   {
     std::ostringstream os;
     os << "thin parts were pressed flat (" << 100 * r.thin_crushed
