@@ -536,8 +536,8 @@ DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const 
   if (!watch || r.thin_crushed <= opt.thickness_retry_above) return r;
   {
     std::ostringstream os;
-    os << "thin parts were pressed flat (" << 100 * r.thin_crushed
-       << "% of the area under half its thickness); deforming again with the thickness barrier";
+    os << "thin parts were pressed flat (" << 100 * r.thin_crushed << "% of the area under "
+       << opt.thickness_keep << " of its thickness); deforming again with the thickness barrier";
     hooks.info(os.str());
   }
   const double first_seconds = r.seconds, crushed = r.thin_crushed;

@@ -118,7 +118,10 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
 /// Surface mode (paper Section 5.3): the same energy, solver and schedule on the triangle mesh
 /// (V, F) alone, with the surface ARAP distortion instead of the volumetric one and no volume
 /// barrier. F may be open: its border edges then get a smoothed l1 term that makes them
-/// axis-aligned (the paper's open-boundary inset). `inverted` stays 0 (no tets).
+/// axis-aligned (the paper's open-boundary inset). `inverted` stays 0 (no tets). A closed F is
+/// deformed without the thickness barrier first; when thin parts are pressed flat (thin_crushed
+/// above thickness_retry_above after a schedule step) it is deformed again from rest with it
+/// (thickness_pairs > 0 then; `seconds` counts both passes, `iterations` the second).
 DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const DeformOptions& opt,
                                         const Hooks& hooks = {});
 
