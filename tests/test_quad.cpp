@@ -298,11 +298,12 @@ TEST(SurfaceFit, FocusedRoundsFinishWhatFewFullRoundsLeave) {
   const SurfaceMesh s = tube(360, 4);
   const geometry::TriangleTree tree(s.V, s.F);
   const double best = 1 - std::cos(22.5 * M_PI / 180);
-  auto run = [&](int rounds, int focus) {
+  auto run = [&](int rounds, int focus, double share = 1.0) {
     Ring r = uneven_ring();
     geometry::SurfaceFitOptions o;
     o.rounds = rounds;
     o.focus_rounds = focus;
+    o.focus_max_share = share;  // the far quads and their neighbours are most of this small ring
     o.quality_floor = 0.5;
     return geometry::fit_to_surface(r.V, r.Q, s, tree, std::vector<char>(16, 1), nullptr,
                                     [&](int v) { return r.worst(v); }, o);
@@ -314,6 +315,10 @@ TEST(SurfaceFit, FocusedRoundsFinishWhatFewFullRoundsLeave) {
   EXPECT_GT(few.max_after, 1.1 * best);  // two rounds are not enough
   EXPECT_LT(focused.max_after, 1.1 * best);
   EXPECT_LT(focused.max_after, few.max_after);
+  // Largest distances over more than the allowed share of the vertices: no focused round.
+  const geometry::SurfaceFitStats capped = run(2, 60, 0.1);
+  EXPECT_EQ(capped.focus_rounds, 0);
+  EXPECT_EQ(capped.max_after, few.max_after);
 }
 
 TEST(SurfaceFit, VerticesOnASharpEdgeSlideAlongIt) {

@@ -45,6 +45,10 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
   for (int f = 0; f < target.F.rows(); ++f)
     samples.push_back((target.V.row(target.F(f, 0)) + target.V.row(target.F(f, 1)) + target.V.row(target.F(f, 2)))
                           .transpose() / 3.0);
+  for (int f = 0; opt.edge_samples && f < target.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k)
+      if (target.F(f, k) < target.F(f, (k + 1) % 3))
+        samples.push_back(0.5 * (target.V.row(target.F(f, k)) + target.V.row(target.F(f, (k + 1) % 3))).transpose());
   const int ns = static_cast<int>(samples.size());
 
   std::vector<std::vector<int>> vq(n);
@@ -155,6 +159,16 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           for (int j = 0; j < 4; ++j) grown[Q(q, j)] = 1;
       }
       active.swap(grown);
+      // Largest distances all over the surface (a sphere): nothing to focus on; the full rounds
+      // have done what they can (unbounded, these rounds took sphere_coarse's mean quad scaled
+      // Jacobian from 0.992 to 0.953 for a 1.7e-3 -> 0.94e-3 Hausdorff distance).
+      int n_active = 0, n_free = 0;
+      for (int v = 0; v < n; ++v) {
+        if (vq[v].empty()) continue;
+        ++n_free;
+        n_active += active[v];
+      }
+      if (n_active > opt.focus_max_share * n_free) break;
       ++focus_rounds_done;
     } else {
       ++full_rounds_done;

@@ -42,7 +42,9 @@ struct QuadOptions {
   double capture_angle_deg = 45;
   /// Last, the free vertices slide on the surface so that it comes closer to the quads
   /// (geometry/surface_fit.h; rounds = 0: off).
-  geometry::SurfaceFitOptions fit;
+  /// (with the input's edge midpoints as samples: basic/eight 3.92e-3 -> 3.60e-3, torus 2.62e-3 ->
+  /// 2.29e-3, fandisk and the spheres unchanged)
+  geometry::SurfaceFitOptions fit{.edge_samples = true};
   /// In the fitting, vertices on sharp edges slide along them too (those the smoothing may slide).
   bool fit_slide = true;
 };
