@@ -451,7 +451,6 @@ std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, dou
   const int n = static_cast<int>(X.rows());
   std::vector<Vec3> vn(n, Vec3::Zero());
   std::vector<double> va(n, 0.0);
-  std::vector<std::vector<int>> vf(n);
   double total = 0;
   for (int f = 0; f < F.rows(); ++f) {
     const Vec3 N = area_normal(X, F(f, 0), F(f, 1), F(f, 2));
@@ -459,13 +458,12 @@ std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, dou
     for (int k = 0; k < 3; ++k) {
       vn[F(f, k)] += N;
       va[F(f, k)] += N.norm() / 3;
-      vf[F(f, k)].push_back(f);
     }
   }
   if (!(total > 0)) return pairs;
   const geometry::TriangleTree tree(X, F);
   for (int v = 0; v < n; ++v) {
-    if (vf[v].empty() || !(vn[v].norm() > 0)) continue;
+    if (!(vn[v].norm() > 0)) continue;  // no triangle (or none with area) at v
     const Vec3 nv = vn[v].normalized(), x = X.row(v).transpose();
     const Vec3 against = -nv;
     const geometry::ClosestHit h = tree.closest(x, &against);
@@ -487,12 +485,17 @@ std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, dou
   return pairs;
 }
 
+namespace {
+// From the point across the part to v, in X.
+Vec3 across(const MatX3d& X, const MatX3i& F, const ThicknessPair& p) {
+  return row(X, p.v) - (p.bary[0] * row(X, F(p.f, 0)) + p.bary[1] * row(X, F(p.f, 1)) + p.bary[2] * row(X, F(p.f, 2)));
+}
+}  // namespace
+
 double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep) {
   double c = 0;
-  for (const ThicknessPair& p : pairs) {
-    const Vec3 q = p.bary[0] * row(X, F(p.f, 0)) + p.bary[1] * row(X, F(p.f, 1)) + p.bary[2] * row(X, F(p.f, 2));
-    if ((row(X, p.v) - q).norm() < keep * p.d0) c += p.w;
-  }
+  for (const ThicknessPair& p : pairs)
+    if (across(X, F, p).norm() < keep * p.d0) c += p.w;
   return c;
 }
 
@@ -501,8 +504,7 @@ double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<Thic
   double E = 0;
   for (const ThicknessPair& p : pairs) {
     const int v[4] = {p.v, F(p.f, 0), F(p.f, 1), F(p.f, 2)};
-    const Vec3 q = p.bary[0] * row(X, v[1]) + p.bary[1] * row(X, v[2]) + p.bary[2] * row(X, v[3]);
-    const Vec3 d = row(X, v[0]) - q;
+    const Vec3 d = across(X, F, p);
     const double len = d.norm(), scale = keep * p.d0;
     const double r = len / scale;
     if (r >= 1) continue;

@@ -125,13 +125,13 @@ struct ThicknessPair {
 /// than max_thickness. Vertices with no such point get no pair (thick parts, open surfaces' borders).
 std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness);
 
+/// Area fraction (sum of w) of the pairs whose two sides are closer than keep x their rest distance in X.
+double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep);
+
 /// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with
 /// phi(r) = r - 1 - log r for r < 1 and 0 above: zero while the part keeps at least `keep` of its
 /// rest thickness, +inf when its two sides meet. C1 at r = 1, convex in r. Hessian: Gauss-Newton
 /// (phi'' grad r grad r^T; the term in phi' hess r is negative there and left out).
-/// Area fraction (sum of w) of the pairs whose two sides are closer than keep x their rest distance in X.
-double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep);
-
 double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep,
                         double weight, Eigen::VectorXd* grad, HessianSink* hess);
 

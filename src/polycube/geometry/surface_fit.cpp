@@ -10,6 +10,20 @@ namespace {
 // Quad corners of the two triangles of quad q (faces 2q and 2q+1, split along the 0-2 diagonal).
 constexpr int kTriCorner[2][3] = {{0, 1, 2}, {0, 2, 3}};
 
+// The points of a quad measured to the surface (the other side of the distance): its centre and
+// edge midpoints, as bilinear parameters (u, w).
+constexpr int kQuadPoints = 5;
+constexpr double kQuadUV[kQuadPoints][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
+
+// Point k of quad q and the bilinear weights b of its four corners there.
+Vec3 quad_point(const MatX3d& V, const MatX4i& Q, int q, int k, double b[4]) {
+  const double u = kQuadUV[k][0], w = kQuadUV[k][1];
+  b[0] = (1 - u) * (1 - w), b[1] = u * (1 - w), b[2] = u * w, b[3] = (1 - u) * w;
+  Vec3 x = Vec3::Zero();
+  for (int i = 0; i < 4; ++i) x += b[i] * V.row(Q(q, i)).transpose();
+  return x;
+}
+
 MatX3i split_quads(const MatX4i& Q) {
   MatX3i F(2 * Q.rows(), 3);
   for (int q = 0; q < Q.rows(); ++q)
@@ -103,19 +117,14 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
   };
   // Largest distance to the surface of the centre and edge midpoints of quad q (the other side).
   auto quad_gap = [&](int q) {
-    double m = 0;
-    for (int k = 0; k < 5; ++k) {
-      static constexpr double uv[5][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
-      const double u = uv[k][0], w = uv[k][1];
-      const Vec3 x = (1 - u) * (1 - w) * V.row(Q(q, 0)).transpose() + u * (1 - w) * V.row(Q(q, 1)).transpose() +
-                     u * w * V.row(Q(q, 2)).transpose() + (1 - u) * w * V.row(Q(q, 3)).transpose();
-      m = std::max(m, tree.closest(x).dist2);
-    }
+    double m = 0, b[4];
+    for (int k = 0; k < kQuadPoints; ++k) m = std::max(m, tree.closest(quad_point(V, Q, q, k, b)).dist2);
     return std::sqrt(m);
   };
 
   std::vector<int> owner;
   measure(st.max_before, st.mean_before, &owner);
+  double sample_max = st.max_before;  // largest sample-to-quads distance at the last measure
   const double p_exp = opt.power;
   // Focused rounds (after the full ones): only the vertices of quads within focus_ratio of the
   // largest distance, on either side, move.
@@ -126,20 +135,19 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     const bool focus = full_rounds_done >= opt.rounds;
     if (focus && (focus_rounds_done >= opt.focus_rounds || opt.rounds == 0)) break;
     if (round > 0) {
-      double mx, mean;
-      measure(mx, mean, &owner);
+      double mean;
+      measure(sample_max, mean, &owner);
       if (focus) {
-        if (mx < best_max * (1 - 1e-3)) {
+        if (sample_max < best_max * (1 - 1e-3)) {
           focus_stalled = 0;
         } else if (++focus_stalled >= 3) {
           break;
         }
-        best_max = std::min(best_max, mx);
+        best_max = std::min(best_max, sample_max);
       }
     }
     if (focus) {
-      double mx = 0;
-      for (int s = 0; s < ns; ++s) mx = std::max(mx, sample_dist[s]);
+      double mx = sample_max;
       std::vector<double> gap(nq);
       for (int q = 0; q < nq; ++q) mx = std::max(mx, gap[q] = opt.two_sided ? quad_gap(q) : 0.0);
       active.assign(n, 0);
@@ -162,13 +170,13 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       // Largest distances all over the surface (a sphere): nothing to focus on; the full rounds
       // have done what they can (unbounded, these rounds took sphere_coarse's mean quad scaled
       // Jacobian from 0.992 to 0.953 for a 1.7e-3 -> 0.94e-3 Hausdorff distance).
-      int n_active = 0, n_free = 0;
+      int n_active = 0, n_mesh = 0;
       for (int v = 0; v < n; ++v) {
         if (vq[v].empty()) continue;
-        ++n_free;
+        ++n_mesh;
         n_active += active[v];
       }
-      if (n_active > opt.focus_max_share * n_free) break;
+      if (n_active > opt.focus_max_share * n_mesh) break;
       ++focus_rounds_done;
     } else {
       ++full_rounds_done;
@@ -185,11 +193,10 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     int moves = 0;
     std::vector<int> S;
     for (int v = 0; v < n; ++v) {
-      if (vq[v].empty()) continue;
+      if (vq[v].empty() || (focus && !active[v])) continue;
       const bool is_free = v < static_cast<int>(free_vertex.size()) && free_vertex[v];
       Vec3 on_edge;
       if (!is_free && !(slide && slide(v, V.row(v).transpose(), on_edge))) continue;
-      if (focus && !active[v]) continue;
       S.clear();
       for (int q : vq[v]) S.insert(S.end(), list.begin() + start[q], list.begin() + start[q + 1]);
       if (S.empty()) continue;
@@ -209,13 +216,9 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
         for (int q : vq[v]) {
           int j = 0;
           while (Q(q, j) != v) ++j;
-          for (int k = 0; k < 5; ++k) {
-            // Bilinear parameters of the sample and v's weight (v is corner j).
-            static constexpr double uv[5][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
-            const double u = uv[k][0], w = uv[k][1];
-            const double b[4] = {(1 - u) * (1 - w), u * (1 - w), u * w, (1 - u) * w};
-            Vec3 x = Vec3::Zero();
-            for (int i = 0; i < 4; ++i) x += b[i] * V.row(Q(q, i)).transpose();
+          for (int k = 0; k < kQuadPoints; ++k) {
+            double b[4];  // v's weight there: b[j] (v is corner j)
+            const Vec3 x = quad_point(V, Q, q, k, b);
             const ClosestHit h = tree.closest(x);
             const double d = std::sqrt(h.dist2);
             e += std::pow(d, p_exp);
