@@ -633,6 +633,9 @@ class Realizer {
       bool accepted = false;
       for (int ls = 0; ls < 40; ++ls, s *= 0.5) {
         Xt = X + s * d;
+        // A trial that inverts a tet has infinite energy: found by the volumes alone, without the
+        // ARAP rotations (fandisk's continuation halved 15 times per iteration, mostly here).
+        if (count_inverted(Xt, T_, arap_rest_) > 0) continue;
         Et = energy(Xt, &gt, true);
         if (Et <= E + 1e-4 * s * slope) {
           accepted = true;
@@ -680,7 +683,7 @@ class Realizer {
           for (int v = 0; v < n; ++v)
             if (planes_.of_vertex[k][v] >= 0) Xt(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
       ++steps;
-      if (!std::isfinite(energy(Xt, nullptr, true)) || steps > max_steps) {
+      if (count_inverted(Xt, T_, arap_rest_) > 0 || steps > max_steps) {  // energy(Xt) infinite
         dt *= 0.5;
         if (dt < 1e-4 || steps > max_steps) {
           // Name the tets that block the path, for the failure message.
