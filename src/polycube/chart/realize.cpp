@@ -12,6 +12,7 @@
 #include <map>
 #include <sstream>
 #include <memory>
+#include <mutex>
 #include <array>
 #include <initializer_list>
 #include <numeric>
@@ -37,6 +38,23 @@ std::unique_ptr<Cholmod> make_solver() {
   s->cholmod().print = 0;
   s->setMode(Eigen::CholmodSupernodalLLt);
   return s;
+}
+
+// CHOLMOD's fill-reducing ordering may call METIS, whose random state is global: two analyses at
+// once (the two realization starts run side by side) interleave it and give orderings, hence
+// round-off and results, that depend on timing (the rod's hexes came out different on every
+// run). Analyses are serialized; the numeric factorizations still run in parallel.
+std::mutex& analysis_mutex() {
+  static std::mutex m;
+  return m;
+}
+void analyze(Cholmod& s, const SpMat& A) {
+  const std::lock_guard<std::mutex> lock(analysis_mutex());
+  s.analyzePattern(A);
+}
+void analyze_and_factorize(Cholmod& s, const SpMat& A) {
+  analyze(s, A);
+  s.factorize(A);
 }
 
 // Volume ratio J = det(F) of tet t (rest -> X) and its gradient over the tet's 12 coordinates.
@@ -297,7 +315,7 @@ class Realizer {
         Kk.setFromTriplets(tk.begin(), tk.end());
         auto& solver = m == Mode::Reduced ? solver_[k] : pinned_solver_[k];
         solver = make_solver();
-        if (nv > 0) solver->compute(Kk);
+        if (nv > 0) analyze_and_factorize(*solver, Kk);
         ok_ = ok_ && (nv == 0 || solver->info() == Eigen::Success);
       }
     }
@@ -351,9 +369,9 @@ class Realizer {
     double E = deform::arap_energy(X, T_, arap_rest_, 1.0, g, nullptr);
     if (!barrier) return E;
     for (int t = 0; t < T_.rows(); ++t) {
+      if (volume_ratio(X, T_, arap_rest_, t) >= tau_) continue;  // barrier off (a NaN goes on to +inf)
       const TetJacobian tj = tet_jacobian(X, T_, arap_rest_, t, g != nullptr);
       if (!(tj.J > 0)) return std::numeric_limits<double>::infinity();
-      if (tj.J >= tau_) continue;
       const double l = std::log(tj.J / tau_);
       const double w = barrier_weight_ * arap_rest_.w[t];
       E += w * l * l;
@@ -609,7 +627,7 @@ class Realizer {
       for (int k = 0; k < 3; ++k)
         if (dof(v, k) >= 0) rhs[dof(v, k)] -= g[3 * v + k];
     auto solver = make_solver();
-    solver->compute(H);
+    analyze_and_factorize(*solver, H);
     MatX3d d = MatX3d::Zero(n, 3);
     if (solver->info() != Eigen::Success) return d;
     const Eigen::VectorXd x = solver->solve(rhs);
@@ -830,7 +848,7 @@ class Realizer {
         B.setFromTriplets(trip.begin(), trip.end());
         const SpMat H = Aw + B;
         if (!analyzed) {
-          chol->analyzePattern(H);
+          analyze(*chol, H);
           analyzed = true;
         }
         // Damped more until it factorizes (the cap above mostly suffices).
@@ -954,7 +972,7 @@ bool relax_eq17(const MatX3i& B, const MatX4i& T, const Planes& planes, MatX3d& 
     A.setFromTriplets(trip.begin(), trip.end());
     const SpMat AtA = (A.transpose() * A).triangularView<Eigen::Lower>();
     auto solver = make_solver();
-    solver->compute(AtA);
+    analyze_and_factorize(*solver, AtA);
     if (solver->info() != Eigen::Success) return false;
     const Eigen::VectorXd y = solver->solve(A.transpose() * rhs);
     for (int v = 0; v < n; ++v)
