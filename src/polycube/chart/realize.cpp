@@ -365,13 +365,17 @@ class Realizer {
 
   // ARAP + near-flat barrier; +inf if a tet is inverted (when `barrier`).
   double energy(const MatX3d& X, Eigen::VectorXd* g, bool barrier) const {
+    // An inverted tet is found from the volumes alone, before the ARAP term's per-tet rotations
+    // (line searches try many such points: fandisk's continuation, 15 trials per iteration).
+    if (barrier)
+      for (int t = 0; t < T_.rows(); ++t)
+        if (!(volume_ratio(X, T_, arap_rest_, t) > 0)) return std::numeric_limits<double>::infinity();
     if (g) g->setZero(3 * X.rows());
     double E = deform::arap_energy(X, T_, arap_rest_, 1.0, g, nullptr);
     if (!barrier) return E;
     for (int t = 0; t < T_.rows(); ++t) {
-      if (volume_ratio(X, T_, arap_rest_, t) >= tau_) continue;  // barrier off (a NaN goes on to +inf)
+      if (volume_ratio(X, T_, arap_rest_, t) >= tau_) continue;  // barrier off
       const TetJacobian tj = tet_jacobian(X, T_, arap_rest_, t, g != nullptr);
-      if (!(tj.J > 0)) return std::numeric_limits<double>::infinity();
       const double l = std::log(tj.J / tau_);
       const double w = barrier_weight_ * arap_rest_.w[t];
       E += w * l * l;
@@ -651,9 +655,6 @@ class Realizer {
       bool accepted = false;
       for (int ls = 0; ls < 40; ++ls, s *= 0.5) {
         Xt = X + s * d;
-        // A trial that inverts a tet has infinite energy: found by the volumes alone, without the
-        // ARAP rotations (fandisk's continuation halved 15 times per iteration, mostly here).
-        if (count_inverted(Xt, T_, arap_rest_) > 0) continue;
         Et = energy(Xt, &gt, true);
         if (Et <= E + 1e-4 * s * slope) {
           accepted = true;
@@ -701,7 +702,7 @@ class Realizer {
           for (int v = 0; v < n; ++v)
             if (planes_.of_vertex[k][v] >= 0) Xt(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
       ++steps;
-      if (count_inverted(Xt, T_, arap_rest_) > 0 || steps > max_steps) {  // energy(Xt) infinite
+      if (count_inverted(Xt, T_, arap_rest_) > 0 || steps > max_steps) {  // a step must keep every tet positive
         dt *= 0.5;
         if (dt < 1e-4 || steps > max_steps) {
           // Name the tets that block the path, for the failure message.
