@@ -111,6 +111,50 @@ TEST(Quad, SharpChainsOfABoxAreItsTwelveEdges) {
   }
 }
 
+// A prism of height 1 over the convex pentagon (0,0) (1,0) (2,0.4) (2,1) (0,1): its top outline
+// turns by atan(0.4) = 21.8 degrees at (1,0), where the two side faces meet at that angle (not a
+// sharp edge), so one chain of sharp edges runs (0,0,1) -> (1,0,1) -> (2,0.4,1) through the bend.
+TEST(Quad, ChainPositionsFollowASharpEdgeThroughABend) {
+  const double P[5][2] = {{0, 0}, {1, 0}, {2, 0.4}, {2, 1}, {0, 1}};
+  SurfaceMesh s;
+  s.V.resize(10, 3);
+  for (int i = 0; i < 5; ++i) {
+    s.V.row(i) << P[i][0], P[i][1], 0;
+    s.V.row(5 + i) << P[i][0], P[i][1], 1;
+  }
+  std::vector<Eigen::RowVector3i> f;
+  for (int i = 1; i + 1 < 5; ++i) {
+    f.emplace_back(0, i + 1, i);          // bottom, facing -z
+    f.emplace_back(5, 5 + i, 5 + i + 1);  // top, facing +z
+  }
+  for (int i = 0; i < 5; ++i) {  // sides, counter-clockwise outline: outward
+    const int a = i, b = (i + 1) % 5;
+    f.emplace_back(a, b, 5 + b);
+    f.emplace_back(a, 5 + b, 5 + a);
+  }
+  s.F.resize(static_cast<Eigen::Index>(f.size()), 3);
+  for (size_t i = 0; i < f.size(); ++i) s.F.row(static_cast<Eigen::Index>(i)) = f[i];
+  const std::vector<unsigned char> sharp = geometry::sharp_edges(s, 30);
+  const geometry::TriangleTree tree(s.V, s.F);
+  const MatX3i adj = face_adjacency(s.F);
+  const geometry::SharpChainPositions chains(s, sharp);
+  geometry::SharpChainPositions::Position a, b, c, far;
+  ASSERT_TRUE(chains.locate(tree, adj, Vec3(0.5, 0, 1), 1e-6, a));
+  ASSERT_TRUE(chains.locate(tree, adj, Vec3(1.5, 0.2, 1), 1e-6, b));
+  // Along the chain: 0.5 to the bend, then half of the edge of length sqrt(1.16).
+  EXPECT_NEAR(chains.distance(a, b), 0.5 + 0.5 * std::sqrt(1.16), 1e-12);
+  EXPECT_NEAR(chains.distance(b, a), chains.distance(a, b), 0);
+  // Just off the edge (within the tolerance) it is found at the same place.
+  ASSERT_TRUE(chains.locate(tree, adj, Vec3(0.5, 0.01, 1), 0.05, c));
+  EXPECT_NEAR(chains.distance(a, c), 0, 1e-12);
+  EXPECT_FALSE(chains.locate(tree, adj, Vec3(0.5, 0.2, 1), 0.05, c));  // too far from any sharp edge
+  // The vertical edge at (0,0) is another chain; so is the bottom outline.
+  ASSERT_TRUE(chains.locate(tree, adj, Vec3(0, 0, 0.5), 1e-6, far));
+  EXPECT_TRUE(std::isinf(chains.distance(a, far)));
+  ASSERT_TRUE(chains.locate(tree, adj, Vec3(0.5, 0, 0), 1e-6, far));
+  EXPECT_TRUE(std::isinf(chains.distance(a, far)));
+}
+
 TEST(Quad, CreaseNoQuadEdgeFollowsIsCaptured) {
   // The box's grid with the three inner vertices of one box edge (x = y = 0) moved 0.1 onto the
   // face x = 0: the quads chamfer that edge. The smoothing alone keeps them on their face; the

@@ -291,8 +291,10 @@ TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
   EXPECT_GE(c["captured"].get<int>(), 1) << c.dump();
   EXPECT_LT(c["max_gap_after_rel"].get<double>(), c["max_gap_before_rel"].get<double>()) << c.dump();
   EXPECT_GT(c["followed_after"].get<double>(), c["followed_before"].get<double>()) << c.dump();
-  EXPECT_LT(q["hausdorff_rel"].get<double>(), 5e-3) << q.dump();
-  EXPECT_GT(q["sj_min"].get<double>(), 0.1) << q.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 4e-3) << q.dump();
+  // Table I's fandisk row: 0.239 (0.254 since feature vertices slide across bends of their sharp
+  // edge and along curved ones around the worst quad, 2026-11-26; 0.233 before).
+  EXPECT_GT(q["sj_min"].get<double>(), 0.239) << q.dump();
 }
 
 // organic/spot in surface mode: the surface ARAP lets thin parts fold flat (its horns pressed into

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <queue>
 #include <set>
@@ -175,6 +176,51 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
     for (const auto& [nb, e] : inc[v])
       if (!used[e]) walk(v, nb, e);
   return chains;
+}
+
+SharpChainPositions::SharpChainPositions(const SurfaceMesh& s, const std::vector<unsigned char>& sharp)
+    : s_(s), sharp_(sharp) {
+  for (const std::vector<int>& c : sharp_chains(s, sharp)) {
+    const int id = static_cast<int>(length_.size());
+    double at = 0;
+    for (size_t i = 0; i + 1 < c.size(); ++i) {
+      edges_[std::minmax(c[i], c[i + 1])] = EdgeAt{id, at, c[i]};
+      at += (s.V.row(c[i + 1]) - s.V.row(c[i])).norm();
+    }
+    length_.push_back(at);
+    closed_.push_back(c.size() > 2 && c.front() == c.back());
+  }
+}
+
+bool SharpChainPositions::locate(const TriangleTree& tree, const MatX3i& adj, const Vec3& p, double tol,
+                                 Position& out) const {
+  const int f0 = tree.closest(p).face;
+  double best = tol;
+  bool found = false;
+  for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
+    if (f < 0) continue;
+    for (int k = 0; k < 3; ++k) {
+      if (!(sharp_[f] >> k & 1)) continue;
+      const int a = s_.F(f, k), b = s_.F(f, (k + 1) % 3);
+      const auto it = edges_.find(std::minmax(a, b));
+      if (it == edges_.end()) continue;  // an open edge
+      double t = 0;
+      const double d = point_segment_distance(p, s_.V.row(a), s_.V.row(b), &t);
+      if (d > best) continue;
+      best = d;
+      found = true;
+      const double len = (s_.V.row(b) - s_.V.row(a)).norm();
+      out.chain = it->second.chain;
+      out.s = it->second.s_from + (a == it->second.from ? t : 1 - t) * len;
+    }
+  }
+  return found;
+}
+
+double SharpChainPositions::distance(const Position& a, const Position& b) const {
+  if (a.chain < 0 || a.chain != b.chain) return std::numeric_limits<double>::infinity();
+  const double d = std::abs(a.s - b.s);
+  return closed_[a.chain] ? std::min(d, length_[a.chain] - d) : d;
 }
 
 std::vector<unsigned char> crease_edges(const SurfaceMesh& s, double weak_deg, double strong_deg) {

@@ -4,9 +4,11 @@
 // corner to corner; creases that fade out inside a face (fandisk), or that the layout missed, are
 // otherwise cut by the quads and dominate the Hausdorff distance.
 #pragma once
+#include <map>
 #include <vector>
 
 #include "polycube/core/types.h"
+#include "polycube/geometry/closest_point.h"
 
 namespace polycube::geometry {
 
@@ -14,6 +16,37 @@ namespace polycube::geometry {
 /// vertex ids split at vertices with other than two sharp edges. A closed loop repeats its first
 /// vertex at the end.
 std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vector<unsigned char>& sharp);
+
+/// Arc-length positions along the chains of sharp edges (sharp_chains): tells whether two points on
+/// sharp edges lie on one chain and how far apart along it. Two quad vertices joined by an edge
+/// that cuts a bend of their sharp edge (fandisk: 22.5 degrees where a soft crease meets it) are
+/// neighbours along that edge although the quad edge's midpoint is off it.
+class SharpChainPositions {
+ public:
+  SharpChainPositions(const SurfaceMesh& s, const std::vector<unsigned char>& sharp);
+  struct Position {
+    int chain = -1;
+    double s = 0;  ///< arc length from the chain's first vertex
+  };
+  /// The position of the point of a sharp edge nearest p among the triangles around p's closest
+  /// point on s (tree: over s; adj: face_adjacency(s.F)), if it lies within tol.
+  bool locate(const TriangleTree& tree, const MatX3i& adj, const Vec3& p, double tol, Position& out) const;
+  /// Arc length between two positions of one chain (the shorter way round a closed loop); infinity
+  /// for positions on different chains.
+  double distance(const Position& a, const Position& b) const;
+
+ private:
+  const SurfaceMesh& s_;
+  const std::vector<unsigned char>& sharp_;
+  std::vector<double> length_;      ///< per chain
+  std::vector<char> closed_;        ///< per chain
+  struct EdgeAt {
+    int chain;
+    double s_from;  ///< arc length at the edge's first vertex along the chain
+    int from;       ///< that vertex
+  };
+  std::map<std::pair<int, int>, EdgeAt> edges_;  ///< sorted vertex pair -> place on its chain
+};
 
 /// Creases of s: the sharp edges (sharp_edges bitmask, open edges left out) of the chains of edges
 /// sharper than `weak_deg` that have at least one edge sharper than `strong_deg`. A crease of a CAD
