@@ -255,6 +255,36 @@ TEST(Quad, FeatureVerticesSlideAlongTheirSharpEdge) {
   }
 }
 
+TEST(Quad, PatternSearchUnfoldsQuadsOnAFace) {
+  // The box's grid (4 cells per unit) with an inner vertex of the face z = 0 moved 0.2 along both
+  // axes, past the diagonal of the cell it leaves: two quads fold (-0.88). Without smoothing, the
+  // pattern search alone unfolds them (the vertex and its neighbours each to the best of their
+  // trial positions: 0.69, a local optimum of the worst quad; the smoothing before it brings such
+  // a vertex back by itself); every vertex stays on the box.
+  const SurfaceMesh s = box(Vec3(0, 0, 0), Vec3(1, 1, 1));
+  hex::HexResult h = grid_of_box(s);
+  const int moved = vertex_at(h.V, Eigen::RowVector3d(0.5, 0.5, 0));
+  ASSERT_GE(moved, 0);
+  h.V(moved, 0) += 0.2;
+  h.V(moved, 1) += 0.2;
+  quad::QuadOptions off;
+  off.smooth_iterations = 0;
+  off.fit.rounds = 0;
+  off.search_sweeps = 0;
+  const quad::QuadResult a = quad::quad_mesh_from_hexes(h.V, h.H, s, off);
+  quad::QuadOptions on = off;
+  on.search_sweeps = 20;
+  const quad::QuadResult b = quad::quad_mesh_from_hexes(h.V, h.H, s, on);
+  EXPECT_LT(a.quality.sj_min, 0);
+  EXPECT_GT(b.quality.sj_min, 0.6) << a.quality.sj_min << " -> " << b.quality.sj_min;
+  EXPECT_EQ(b.quality.inverted, 0);
+  EXPECT_GT(b.search_moves, 0);
+  for (int v = 0; v < b.V.rows(); ++v) {
+    const Eigen::RowVector3d p = b.V.row(v);
+    EXPECT_NEAR(std::min({p.minCoeff(), 1 - p.maxCoeff()}), 0.0, 1e-9);
+  }
+}
+
 namespace {
 // Open tube of radius 1 around the z axis, z in [0, 1], `seg` segments around and `rows` rows.
 SurfaceMesh tube(int seg, int rows) {

@@ -23,6 +23,7 @@ std::vector<std::vector<int>> sharp_chains(const SurfaceMesh& s, const std::vect
 /// neighbours along that edge although the quad edge's midpoint is off it.
 class SharpChainPositions {
  public:
+  /// s and sharp (as from sharp_edges) are kept by reference: they must outlive this object.
   SharpChainPositions(const SurfaceMesh& s, const std::vector<unsigned char>& sharp);
   struct Position {
     int chain = -1;

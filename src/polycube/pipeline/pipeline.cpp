@@ -719,6 +719,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"hausdorff_rel", hd.max / box.diagonal().norm()},
                           {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
                           {"smooth_moves", qr.smooth_moves},
+                          {"search_moves", qr.search_moves},
                           {"fit", fit_json(qr.fit, box.diagonal().norm())},
                           {"creases", {{"runs", qr.crease_runs},
                                        {"captured", qr.crease_captured},

@@ -335,6 +335,48 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     poor_only = true;
     smooth();
   }
+  // Then the free vertices of the worst quads: the smoothing only tries the way to the mean of
+  // their neighbours; here, a pattern search (16 directions in the tangent plane, steps of 0.2,
+  // 0.1, 0.05 and 0.025 x the vertex's mean edge length, back on the surface) for the position of
+  // the largest worst quad around the vertex.
+  r.search_moves = 0;
+  for (int sweep = 0; sweep < opt.search_sweeps; ++sweep) {
+    int moves = 0;
+    for (int v = 0; v < n; ++v) {
+      if (nb[v].empty() || fixed[v] || (!pinned.empty() && pinned[v])) continue;
+      const double before = worst(v);
+      if (!(before < opt.search_below)) continue;
+      const Vec3 x = r.V.row(v).transpose();
+      Vec3 nrm = Vec3::Zero();
+      for (int q : vq[v]) {
+        const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
+        nrm += (cc - a).cross(d - b);
+      }
+      if (!(nrm.norm() > 0)) continue;
+      nrm.normalize();
+      const Vec3 t1 = nrm.unitOrthogonal(), t2 = nrm.cross(t1);
+      double h = 0;
+      for (int u : nb[v]) h += (r.V.row(u).transpose() - x).norm();
+      h /= static_cast<double>(nb[v].size());
+      const bool cross = before < kCrossPatchBelow;
+      double best_q = before;
+      Vec3 best_p = x;
+      for (double step : {0.2, 0.1, 0.05, 0.025}) {
+        for (int k = 0; k < 16; ++k) {
+          const double a = k * M_PI / 8;
+          const Vec3 y = x + step * h * (std::cos(a) * t1 + std::sin(a) * t2);
+          const Vec3 p = cross ? tree.closest(y, &nrm).point : tree.closest(y, &nrm, &patch_of_face, patch[v]).point;
+          r.V.row(v) = p.transpose();
+          const double q = worst(v);
+          if (q > best_q + 1e-9) best_q = q, best_p = p;
+        }
+      }
+      r.V.row(v) = best_p.transpose();
+      moves += best_q > before;
+    }
+    r.search_moves += moves;
+    if (moves == 0) break;
+  }
   if (opt.fit.rounds > 0) {
     std::vector<char> free_vertex(n, 0);
     for (int v = 0; v < n; ++v) free_vertex[v] = !fixed[v] && (pinned.empty() || !pinned[v]);

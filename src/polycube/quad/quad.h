@@ -45,6 +45,11 @@ struct QuadOptions {
   /// (with the input's edge midpoints as samples: basic/eight 3.92e-3 -> 3.60e-3, torus 2.62e-3 ->
   /// 2.29e-3, fandisk and the spheres unchanged)
   geometry::SurfaceFitOptions fit{.edge_samples = true};
+  /// After the smoothing, free vertices of quads below search_below move to the best of a few
+  /// positions around them (pattern search on the worst quad around the vertex), at most
+  /// search_sweeps times over the mesh (0 = off).
+  double search_below = 0.5;
+  int search_sweeps = 20;
   /// In the fitting, vertices on sharp edges slide along them too (those the smoothing may slide).
   bool fit_slide = true;
 };
@@ -56,6 +61,7 @@ struct QuadResult {
   int feature_vertices = 0;      ///< vertices kept on sharp edges of the input
   QuadQuality extracted, quality;
   int smooth_moves = 0;
+  int search_moves = 0;          ///< moves of the pattern search on the worst quads (QuadOptions::search_below)
   geometry::SurfaceFitStats fit;  ///< the fitting to the surface (distances from its samples to the quads)
   int crease_runs = 0;           ///< runs of sharp edges no quad edge followed after the extraction
   int crease_captured = 0;       ///< of those, runs a path of quad edges was moved onto
