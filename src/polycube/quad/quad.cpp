@@ -193,7 +193,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           // Around a poor quad (below kPoorQuad) the chords may cut the edge up to
           // kPoorQuadChordGap x elen: fandisk's worst quad has three corners on a curved sharp edge,
           // its angle at the middle one 180 degrees less the edge's turn between the other two,
-          // so only a longer arc (a larger sagitta) opens it (0.233 -> 0.254).
+          // so only a longer arc (a larger sagitta) opens it (0.233 -> 0.280).
           const double gap_limit = std::max(chord_gap(x), (before < kPoorQuad ? poor_gap : 0.05) * elen);
           Vec3 best_p = x;
           double best_q = before;
