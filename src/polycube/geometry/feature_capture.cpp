@@ -194,26 +194,20 @@ SharpChainPositions::SharpChainPositions(const SurfaceMesh& s, const std::vector
 
 bool SharpChainPositions::locate(const TriangleTree& tree, const MatX3i& adj, const Vec3& p, double tol,
                                  Position& out) const {
-  const int f0 = tree.closest(p).face;
   double best = tol;
   bool found = false;
-  for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
-    if (f < 0) continue;
-    for (int k = 0; k < 3; ++k) {
-      if (!(sharp_[f] >> k & 1)) continue;
-      const int a = s_.F(f, k), b = s_.F(f, (k + 1) % 3);
-      const auto it = edges_.find(std::minmax(a, b));
-      if (it == edges_.end()) continue;  // an open edge
-      double t = 0;
-      const double d = point_segment_distance(p, s_.V.row(a), s_.V.row(b), &t);
-      if (d > best) continue;
-      best = d;
-      found = true;
-      const double len = (s_.V.row(b) - s_.V.row(a)).norm();
-      out.chain = it->second.chain;
-      out.s = it->second.s_from + (a == it->second.from ? t : 1 - t) * len;
-    }
-  }
+  for_each_sharp_edge_near(s_, sharp_, adj, tree, p, [&](int a, int b) {
+    const auto it = edges_.find(std::minmax(a, b));
+    if (it == edges_.end()) return;  // an open edge
+    double t = 0;
+    const double d = point_segment_distance(p, s_.V.row(a), s_.V.row(b), &t);
+    if (d > best) return;
+    best = d;
+    found = true;
+    const double len = (s_.V.row(b) - s_.V.row(a)).norm();
+    out.chain = it->second.chain;
+    out.s = it->second.s_from + (a == it->second.from ? t : 1 - t) * len;
+  });
   return found;
 }
 

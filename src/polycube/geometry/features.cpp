@@ -30,23 +30,18 @@ bool near_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sha
 
 bool closest_on_sharp_edge(const SurfaceMesh& s, const std::vector<unsigned char>& sharp, const MatX3i& adj,
                            const TriangleTree& tree, const Vec3& p, double tol, Vec3& on_edge) {
-  const int f0 = tree.closest(p).face;
   double best = tol;
   bool found = false;
-  for (int f : {f0, adj(f0, 0), adj(f0, 1), adj(f0, 2)}) {
-    if (f < 0) continue;
-    for (int k = 0; k < 3; ++k) {
-      if (!(sharp[f] >> k & 1)) continue;
-      const Vec3 a = s.V.row(s.F(f, k)), b = s.V.row(s.F(f, (k + 1) % 3)), ab = b - a;
-      const double t = closest_point_on_segment(p, a, b);
-      const double d = (a + t * ab - p).norm();
-      if (d <= best) {
-        best = d;
-        found = true;
-        on_edge = a + t * ab;
-      }
+  for_each_sharp_edge_near(s, sharp, adj, tree, p, [&](int ia, int ib) {
+    const Vec3 a = s.V.row(ia), b = s.V.row(ib), ab = b - a;
+    const double t = closest_point_on_segment(p, a, b);
+    const double d = (a + t * ab - p).norm();
+    if (d <= best) {
+      best = d;
+      found = true;
+      on_edge = a + t * ab;
     }
-  }
+  });
   return found;
 }
 

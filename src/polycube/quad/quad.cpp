@@ -161,8 +161,20 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return count == 2;
   };
-  double poor_gap = 0.05;  // kPoorQuadChordGap in the last pass only
   bool poor_only = false;  // the last pass: only feature vertices of quads below kPoorQuad slide
+  // The sum of the (doubled) area normals of v's quads, and a point of the surface near y for v:
+  // on v's smooth patch unless `cross` (the vertex of a poor quad may leave it).
+  auto quads_normal = [&](int v) {
+    Vec3 nrm = Vec3::Zero();
+    for (int q : vq[v]) {
+      const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
+      nrm += (cc - a).cross(d - b);
+    }
+    return nrm;
+  };
+  auto onto_surface = [&](int v, const Vec3& y, const Vec3& nrm, bool cross) {
+    return cross ? tree.closest(y, &nrm).point : tree.closest(y, &nrm, &patch_of_face, patch[v]).point;
+  };
   auto smooth = [&]() {
     for (int it = 0; it < opt.smooth_iterations; ++it) {
       hooks.report("quad", static_cast<double>(it) / opt.smooth_iterations);
@@ -190,11 +202,11 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
             }
             return g;
           };
-          // Around a poor quad (below kPoorQuad) the chords may cut the edge up to
+          // In the last pass (quads below kPoorQuad) the chords may cut the edge up to
           // kPoorQuadChordGap x elen: fandisk's worst quad has three corners on a curved sharp edge,
           // its angle at the middle one 180 degrees less the edge's turn between the other two,
           // so only a longer arc (a larger sagitta) opens it (0.233 -> 0.280).
-          const double gap_limit = std::max(chord_gap(x), (before < kPoorQuad ? poor_gap : 0.05) * elen);
+          const double gap_limit = std::max(chord_gap(x), (poor_only ? kPoorQuadChordGap : 0.05) * elen);
           Vec3 best_p = x;
           double best_q = before;
           for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
@@ -216,15 +228,10 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         Vec3 c = Vec3::Zero();
         for (int u : nb[v]) c += r.V.row(u).transpose();
         c /= static_cast<double>(nb[v].size());
-        Vec3 nrm = Vec3::Zero();
-        for (int q : vq[v]) {
-          const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
-          nrm += (cc - a).cross(d - b);
-        }
+        const Vec3 nrm = quads_normal(v);
         const Vec3 x = r.V.row(v).transpose();
         for (double t : {1.0, 0.5, 0.25}) {
-          const Vec3 p = cross ? tree.closest(x + t * (c - x), &nrm).point
-                               : tree.closest(x + t * (c - x), &nrm, &patch_of_face, patch[v]).point;
+          const Vec3 p = onto_surface(v, x + t * (c - x), nrm, cross);
           r.V.row(v) = p.transpose();
           const double after = worst(v);
           if (after > before + 1e-9 || (after >= before && after > 0.3)) {
@@ -331,7 +338,6 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
   // edges); in the smoothing the extracted mesh's many poor quads would all take them (mambo_B2:
   // Hausdorff 1.55e-3 -> 1.76e-3).
   if (quad_quality(r.V, r.Q).sj_min < kPoorQuad) {
-    poor_gap = kPoorQuadChordGap;
     poor_only = true;
     smooth();
   }
@@ -347,11 +353,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
       const double before = worst(v);
       if (!(before < opt.search_below)) continue;
       const Vec3 x = r.V.row(v).transpose();
-      Vec3 nrm = Vec3::Zero();
-      for (int q : vq[v]) {
-        const Vec3 a = r.V.row(r.Q(q, 0)), b = r.V.row(r.Q(q, 1)), cc = r.V.row(r.Q(q, 2)), d = r.V.row(r.Q(q, 3));
-        nrm += (cc - a).cross(d - b);
-      }
+      Vec3 nrm = quads_normal(v);
       if (!(nrm.norm() > 0)) continue;
       nrm.normalize();
       const Vec3 t1 = nrm.unitOrthogonal(), t2 = nrm.cross(t1);
@@ -365,7 +367,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         for (int k = 0; k < 16; ++k) {
           const double a = k * M_PI / 8;
           const Vec3 y = x + step * h * (std::cos(a) * t1 + std::sin(a) * t2);
-          const Vec3 p = cross ? tree.closest(y, &nrm).point : tree.closest(y, &nrm, &patch_of_face, patch[v]).point;
+          const Vec3 p = onto_surface(v, y, nrm, cross);
           r.V.row(v) = p.transpose();
           const double q = worst(v);
           if (q > best_q + 1e-9) best_q = q, best_p = p;
