@@ -452,6 +452,39 @@ TEST(SurfaceFit, NoMoveTakesAQuadBelowTheFloor) {
   EXPECT_EQ(d.moves, 0);
 }
 
+TEST(SurfaceFit, DenseSamplesFindTheLargestDistanceBetweenTheCoarseOnes) {
+  // A flat unit square (two triangles) under a roof of two quads whose ridge runs along y at
+  // x = 0.4, 0.1 high. The distance from (x, y, 0) to the roof is min(x sin a, (1 - x) sin b)
+  // (a, b: the slopes' angles), largest at x = 0.404, between the square's vertices and centroids
+  // (x = 1/3, 2/3); a grid of tenths on the triangles near the largest distance has x = 0.4. No vertex may move: the figures are measurements.
+  SurfaceMesh s;
+  s.V.resize(4, 3);
+  s.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0;
+  s.F.resize(2, 3);
+  s.F << 0, 1, 2, 0, 2, 3;
+  const geometry::TriangleTree tree(s.V, s.F);
+  const double h = 0.1, sa = h / std::hypot(0.4, h), sb = h / std::hypot(0.6, h);
+  auto run = [&](int dense) {
+    MatX3d V(6, 3);
+    V << 0, 0, 0, 0.4, 0, h, 0.4, 1, h, 0, 1, 0, 1, 0, 0, 1, 1, 0;
+    MatX4i Q(2, 4);
+    Q << 0, 1, 2, 3, 1, 4, 5, 2;
+    geometry::SurfaceFitOptions o;
+    o.focus_dense = dense;
+    const geometry::SurfaceFitStats st = geometry::fit_to_surface(V, Q, s, tree, std::vector<char>(6, 0), nullptr,
+                                                                  [](int) { return 1.0; }, o);
+    EXPECT_EQ(st.moves, 0);
+    return st.max_after;
+  };
+  double truth = 0;  // on a fine grid of x
+  for (int i = 0; i <= 10000; ++i) truth = std::max(truth, std::min(sa * i / 1e4, sb * (1 - i / 1e4)));
+  const double coarse = run(0), fine = run(10);
+  EXPECT_NEAR(coarse, sa / 3, 1e-9);  // the centroid at x = 1/3
+  EXPECT_LT(coarse, truth - 0.01);
+  EXPECT_NEAR(fine, std::min(sa * 0.4, sb * 0.6), 1e-9);  // x = 0.4
+  EXPECT_GT(fine, truth - 2e-3);
+}
+
 TEST(Quad, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {
   // As for hexes: a tet mesh's V with its boundary as the target gives the quads of its surface
   // alone (the interior vertices were samples of the fitting and of the crease checks).

@@ -63,7 +63,15 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     for (int k = 0; k < 3; ++k)
       if (target.F(f, k) < target.F(f, (k + 1) % 3))
         samples.push_back(0.5 * (target.V.row(target.F(f, k)) + target.V.row(target.F(f, (k + 1) % 3))).transpose());
-  const int ns = static_cast<int>(samples.size());
+  int ns = static_cast<int>(samples.size());
+  std::vector<int> vertex_sample(target.V.rows(), -1);
+  {
+    int k = 0;
+    for (int i = 0; i < target.V.rows(); ++i)
+      if (used[i]) vertex_sample[i] = k++;
+  }
+  const int centroid0 = static_cast<int>(std::count(used.begin(), used.end(), 1));
+  std::vector<char> dense(opt.focus_dense > 1 ? target.F.rows() : 0, 0);
 
   std::vector<std::vector<int>> vq(n);
   for (int q = 0; q < nq; ++q)
@@ -137,6 +145,31 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     if (round > 0) {
       double mean;
       measure(sample_max, mean, &owner);
+      if (focus && !dense.empty()) {
+        // Denser samples on the triangles whose samples are near the largest distance.
+        const int before = ns, L = opt.focus_dense;
+        for (int f = 0; f < target.F.rows(); ++f) {
+          if (dense[f]) continue;
+          double d = sample_dist[centroid0 + f];
+          for (int k = 0; k < 3; ++k) d = std::max(d, sample_dist[vertex_sample[target.F(f, k)]]);
+          if (d < opt.focus_ratio * sample_max) continue;
+          dense[f] = 1;
+          const Vec3 a = target.V.row(target.F(f, 0)), b = target.V.row(target.F(f, 1)), c = target.V.row(target.F(f, 2));
+          for (int i = 0; i <= L; ++i)
+            for (int j = 0; i + j <= L; ++j) {
+              if (i == L || j == L || i + j == 0) continue;  // the vertices are samples already
+              samples.push_back(a + (b - a) * (double(i) / L) + (c - a) * (double(j) / L));
+            }
+        }
+        if (static_cast<int>(samples.size()) > before) {
+          ns = static_cast<int>(samples.size());
+          sample_dist.resize(ns);
+          double mean;
+          measure(sample_max, mean, &owner);
+          best_max = std::max(best_max, sample_max);
+          focus_stalled = 0;
+        }
+      }
       if (focus) {
         if (sample_max < best_max * (1 - 1e-3)) {
           focus_stalled = 0;

@@ -47,6 +47,11 @@ struct SurfaceFitOptions {
   /// see QuadOptions). Off for hexes, whose fitting is followed by their optimization (rod:
   /// 4.03e-3 without, 4.48e-3 with).
   bool edge_samples = false;
+  /// In the focused rounds, the target triangles with a sample within focus_ratio of the largest
+  /// distance get a denser grid of samples (barycentric steps of 1/focus_dense; 0 = off): the
+  /// largest distance is often reached between a triangle's vertices, centroid and edge midpoints
+  /// (fandisk's quads: 3.74e-3 at those samples, 3.88e-3 at the Hausdorff measure's 200k).
+  int focus_dense = 0;
 };
 
 struct SurfaceFitStats {

@@ -44,7 +44,7 @@ struct QuadOptions {
   /// (geometry/surface_fit.h; rounds = 0: off).
   /// (with the input's edge midpoints as samples: basic/eight 3.92e-3 -> 3.60e-3, torus 2.62e-3 ->
   /// 2.29e-3, fandisk and the spheres unchanged)
-  geometry::SurfaceFitOptions fit{.edge_samples = true};
+  geometry::SurfaceFitOptions fit{.edge_samples = true, .focus_dense = 4};
   /// After the smoothing, free vertices of quads below search_below move to the best of a few
   /// positions around them (pattern search on the worst quad around the vertex), at most
   /// search_sweeps times over the mesh (0 = off).
