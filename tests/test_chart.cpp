@@ -327,6 +327,51 @@ TEST(Chart, CleanupOpensARimWhereAFoldedSheetMeetsItself) {
   EXPECT_LT(rw.charts, 6);
 }
 
+TEST(Chart, CleanupOpensTheMissingSideAtAPinchInsteadOfRemovingTheChart) {
+  // A box whose top face is painted: +Z on the triangle |x - 1/2| < y/2 (apex at the -Y edge),
+  // the rest of the top +X or -X by the side of x = 1/2 (as if the top were a ridge there). The
+  // +Z chart then has degree 3 (+X, -X, +Y): its -Y side has length zero where +X and -X meet at
+  // the apex. The cleanup gives the triangles around the apex, and along the rest of the +X / -X
+  // contact (the staircase's first rows), the missing label -Y (joining the -Y face) instead of
+  // relabelling the +Z chart whole, which would cascade.
+  const SurfaceMesh s = grid_box(16);
+  const auto good = chart::label_by_normal(s.V, s.F);
+  auto labels = good;
+  for (int f = 0; f < s.F.rows(); ++f) {
+    if (good[f] != kPosZ) continue;
+    const Vec3 c = (s.V.row(s.F(f, 0)) + s.V.row(s.F(f, 1)) + s.V.row(s.F(f, 2))).transpose() / 3;
+    if (std::abs(c[0] - 0.5) >= c[1] / 2) labels[f] = c[0] > 0.5 ? kPosX : kNegX;
+  }
+  const auto painted = labels;
+  int top = 0;
+  for (int l : painted) top += l == kPosZ;
+  auto degree_of_top = [&](const std::vector<int>& ls) {
+    const chart::Charts c = chart::build_charts(s.V, s.F, ls);
+    for (int i = 0; i < c.count(); ++i)
+      if (c.label[i] == kPosZ) return c.degree(i);
+    return -1;
+  };
+  ASSERT_EQ(degree_of_top(painted), 3);
+  chart::CleanupOptions o;
+  o.straighten = false;  // the staircase borders stay as painted
+  o.fix_degenerate = false;
+  const auto st = chart::cleanup_labels(s.V, s.F, labels, o);
+  EXPECT_GE(st.pinches, 1);
+  int kept = 0, opened = 0;
+  for (int f = 0; f < s.F.rows(); ++f) {
+    kept += painted[f] == kPosZ && labels[f] == kPosZ;
+    opened += good[f] == kPosZ && labels[f] == kNegY;
+  }
+  EXPECT_GE(kept, top * 9 / 10);
+  EXPECT_GT(opened, 0);
+  EXPECT_EQ(degree_of_top(labels), 4);
+  // Without the pinch rule the +Z chart goes whole.
+  auto whole = painted;
+  o.pinch_above = 1;
+  EXPECT_EQ(chart::cleanup_labels(s.V, s.F, whole, o).pinches, 0);
+  EXPECT_EQ(std::count(whole.begin(), whole.end(), kPosZ), 0);
+}
+
 TEST(Realize, SplitTetEdgesKeepsVolumeAndOrientation) {
   // Two tets sharing the edge (0, 1); splitting it and another edge of the first tet.
   MatX3d V(5, 3);

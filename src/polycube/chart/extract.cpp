@@ -651,6 +651,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
     e.cleanup.degree3 += again.degree3;
     e.cleanup.opposite += again.opposite;
     e.cleanup.rims += again.rims;
+    e.cleanup.pinches += again.pinches;
     e.cleanup.misoriented += changed;
     e.cleanup.relabelled_faces = 0;
     for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];

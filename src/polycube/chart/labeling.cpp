@@ -263,6 +263,73 @@ int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexChar
   return changed;
 }
 
+// Step 3 for a large chart of degree 2 or 3: two of its neighbours have opposite labels (axis a)
+// and meet at its border, so the chart's side between them (axis b, the third) has length zero;
+// relabelling the chart whole removes a large part of the layout and starts a cascade (homer in
+// surface mode: 111 charts down to 6). Instead the triangles of the three charts around the
+// vertices where they meet, and of a and b along the rest of their contact from there, take the
+// label of axis b that points from the chart to the pinch (the sum, over the chart's triangles
+// around it, of centroid -> vertex), opening the missing side. Returns the triangles relabelled
+// (0: no such pair, or no direction).
+int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCharts& vcharts, int chart,
+               std::vector<int>& labels) {
+  const int nv = static_cast<int>(X.rows());
+  auto touches = [&](int v, int ch) {
+    return std::any_of(vcharts[v].begin(), vcharts[v].end(), [&](const auto& p) { return p.first == ch; });
+  };
+  for (auto [a, la] : c.neighbors[chart])
+    for (auto [b, lb] : c.neighbors[chart]) {
+      if (!(a < b) || c.label[a] != (c.label[b] ^ 1)) continue;
+      const int axis_b = 3 - axis_of(c.label[chart]) - axis_of(c.label[a]);
+      if (axis_b < 0 || axis_b > 2 || axis_b == axis_of(c.label[chart])) continue;
+      // The pinch: vertices of the chart where a and b meet; then the whole contact of a and b
+      // that runs on from there (a and b may meet along edges beyond the chart: the missing side
+      // must separate them there too, or it is left with three sides itself).
+      std::vector<char> sel(nv, 0);
+      std::vector<int> stack;
+      for (int v = 0; v < nv; ++v)
+        if (touches(v, chart) && touches(v, a) && touches(v, b)) {
+          sel[v] = 1;
+          stack.push_back(v);
+        }
+      if (stack.empty()) continue;
+      const std::vector<int> pinch = stack;
+      std::vector<std::vector<int>> adj(nv);
+      for (int f = 0; f < F.rows(); ++f)
+        for (int k = 0; k < 3; ++k) adj[F(f, k)].push_back(F(f, (k + 1) % 3));
+      while (!stack.empty()) {
+        const int v = stack.back();
+        stack.pop_back();
+        for (int w : adj[v])
+          if (!sel[w] && touches(w, a) && touches(w, b)) {
+            sel[w] = 1;
+            stack.push_back(w);
+          }
+      }
+      std::vector<char> at_pinch(nv, 0);
+      for (int v : pinch) at_pinch[v] = 1;
+      double out = 0;
+      for (int f = 0; f < F.rows(); ++f) {
+        if (c.of_face[f] != chart) continue;
+        const Vec3 centroid = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
+        for (int j = 0; j < 3; ++j)
+          if (at_pinch[F(f, j)]) out += X(F(f, j), axis_b) - centroid[axis_b];
+      }
+      if (!(std::abs(out) > 0)) continue;
+      const int to = 2 * axis_b + (out > 0 ? 0 : 1);
+      int changed = 0;
+      for (int f = 0; f < F.rows(); ++f) {
+        const int ch = c.of_face[f];
+        if (ch != chart && ch != a && ch != b) continue;
+        if (!sel[F(f, 0)] && !sel[F(f, 1)] && !sel[F(f, 2)]) continue;
+        labels[f] = to;
+        ++changed;
+      }
+      if (changed > 0) return changed;
+    }
+  return 0;
+}
+
 // Charts meeting a chart of the opposite label (along an edge or at a vertex), each the smaller
 // of such a pair, by increasing area (equal areas: in the order the vertices first show them).
 std::vector<int> smaller_of_opposite_pairs(const Charts& c, const VertexCharts& vcharts) {
@@ -412,7 +479,17 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
           best_deg = deg;
         }
       }
-      if (best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
+      bool pinched = false;
+      if (best >= 0 && best_deg >= 2 && s.pinches < opt.max_pinches && opt.separate_opposite &&
+          c.area[best] > opt.pinch_above * std::accumulate(c.area.begin(), c.area.end(), 0.0))
+        if (const int r = open_pinch(X, F, c, vcharts, best, labels); r > 0) {
+          hooks.debug("cleanup: side of " + std::to_string(r) + " triangles opened at a pinch of chart " +
+                      std::to_string(best) + " (" + label_name(c.label[best]) + ", " + std::to_string(c.faces[best]) +
+                      " triangles, degree " + std::to_string(best_deg) + ")");
+          s.pinches++;
+          changed = pinched = true;
+        }
+      if (!pinched && best >= 0 && best_deg >= 1 && !c.neighbors[best].empty()) {
         bool safe;
         const int to = target(best, safe);
         tell(c, best, to, "low degree");

@@ -70,6 +70,12 @@ struct CleanupOptions {
   /// Rims opened at most per cleanup (a rim can meet a chart opposite to its own label, be removed
   /// and be opened again; past this, step 4 relabels whole charts)
   int max_rims = 4;
+  /// Step 3, for a chart of degree 2 or 3 above this fraction of the total area whose two opposite
+  /// neighbours meet at its border (a pinch: the side between them has length zero): instead of
+  /// relabelling the chart whole, the triangles of the three charts around the pinch vertices take
+  /// the missing label (the side the polycube face needs there). At most max_pinches per cleanup.
+  double pinch_above = 0.01;
+  int max_pinches = 16;
   int max_rounds = 1000;         ///< cap on relabelling rounds (each round removes one chart or more)
 };
 
@@ -80,6 +86,7 @@ struct CleanupStats {
   int degree1 = 0, degree2 = 0, degree3 = 0;  ///< charts removed, by degree
   int opposite = 0;    ///< charts relabelled because they met a chart of the opposite label
   int rims = 0;        ///< rims opened between large opposite charts that met (see rim_above)
+  int pinches = 0;     ///< sides opened at pinches of low-degree charts (see pinch_above)
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
   int misoriented = 0; ///< triangles relabelled after a realization left them facing away (extract_polycube)

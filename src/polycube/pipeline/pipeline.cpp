@@ -525,7 +525,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["initial_charts"] = ex.initial_charts;
       pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
                        {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
-                       {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite}, {"rims", ex.cleanup.rims},
+                       {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite}, {"rims", ex.cleanup.rims}, {"pinches", ex.cleanup.pinches},
                        {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
                        {"relabelled_faces", ex.cleanup.relabelled_faces},
                        {"collapsed_ratio", opt.polycube.collapsed_ratio}};
