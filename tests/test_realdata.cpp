@@ -337,6 +337,7 @@ TEST(RealSurfaceOrganic, HomerKeepsItsLayoutAndIsRealized) {
   EXPECT_EQ(q["inverted"], 0);
   EXPECT_GT(q["sj_min"].get<double>(), 0.2) << q.dump();
   EXPECT_LT(q["hausdorff_rel"].get<double>(), 0.05) << q.dump();
+  EXPECT_EQ(q["hausdorff_input_to_quad_at"].size(), 3u);
 }
 
 // organic/blub in surface mode: no valid polycube yet (triangles left facing away after the
