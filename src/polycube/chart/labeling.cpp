@@ -263,12 +263,12 @@ int open_rim(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexChar
   return changed;
 }
 
-// Step 3 for a large chart of degree 2 or 3: two of its neighbours have opposite labels (axis a)
-// and meet at its border, so the chart's side between them (axis b, the third) has length zero;
+// Step 3 for a large chart of degree 2 or 3: two of its neighbours a and b have opposite labels
+// and meet at its border, so the chart's side between them (along the third axis) has length zero;
 // relabelling the chart whole removes a large part of the layout and starts a cascade (homer in
 // surface mode: 111 charts down to 6). Instead the triangles of the three charts around the
 // vertices where they meet, and of a and b along the rest of their contact from there, take the
-// label of axis b that points from the chart to the pinch (the sum, over the chart's triangles
+// label of the third axis that points from the chart to the pinch (the sum, over the chart's triangles
 // around it, of centroid -> vertex), opening the missing side. Returns the triangles relabelled
 // (0: no such pair, or no direction).
 int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCharts& vcharts, int chart,
@@ -277,11 +277,12 @@ int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCh
   auto touches = [&](int v, int ch) {
     return std::any_of(vcharts[v].begin(), vcharts[v].end(), [&](const auto& p) { return p.first == ch; });
   };
-  for (auto [a, la] : c.neighbors[chart])
-    for (auto [b, lb] : c.neighbors[chart]) {
+  for (const auto& na : c.neighbors[chart])
+    for (const auto& nb : c.neighbors[chart]) {
+      const int a = na.first, b = nb.first;  // two neighbour charts
       if (!(a < b) || c.label[a] != (c.label[b] ^ 1)) continue;
-      const int axis_b = 3 - axis_of(c.label[chart]) - axis_of(c.label[a]);
-      if (axis_b < 0 || axis_b > 2 || axis_b == axis_of(c.label[chart])) continue;
+      const int third = 3 - axis_of(c.label[chart]) - axis_of(c.label[a]);
+      if (third < 0 || third > 2 || third == axis_of(c.label[chart])) continue;
       // The pinch: vertices of the chart where a and b meet; then the whole contact of a and b
       // that runs on from there (a and b may meet along edges beyond the chart: the missing side
       // must separate them there too, or it is left with three sides itself).
@@ -313,10 +314,10 @@ int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCh
         if (c.of_face[f] != chart) continue;
         const Vec3 centroid = (X.row(F(f, 0)) + X.row(F(f, 1)) + X.row(F(f, 2))).transpose() / 3.0;
         for (int j = 0; j < 3; ++j)
-          if (at_pinch[F(f, j)]) out += X(F(f, j), axis_b) - centroid[axis_b];
+          if (at_pinch[F(f, j)]) out += X(F(f, j), third) - centroid[third];
       }
       if (!(std::abs(out) > 0)) continue;
-      const int to = 2 * axis_b + (out > 0 ? 0 : 1);
+      const int to = 2 * third + (out > 0 ? 0 : 1);
       int changed = 0;
       for (int f = 0; f < F.rows(); ++f) {
         const int ch = c.of_face[f];
