@@ -277,6 +277,7 @@ int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCh
   auto touches = [&](int v, int ch) {
     return std::any_of(vcharts[v].begin(), vcharts[v].end(), [&](const auto& p) { return p.first == ch; });
   };
+  std::vector<std::vector<int>> adj;  // vertex -> next vertices around its triangles, built once if needed
   for (const auto& na : c.neighbors[chart])
     for (const auto& nb : c.neighbors[chart]) {
       const int a = na.first, b = nb.first;  // two neighbour charts
@@ -294,10 +295,12 @@ int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCh
           stack.push_back(v);
         }
       if (stack.empty()) continue;
-      const std::vector<int> pinch = stack;
-      std::vector<std::vector<int>> adj(nv);
-      for (int f = 0; f < F.rows(); ++f)
-        for (int k = 0; k < 3; ++k) adj[F(f, k)].push_back(F(f, (k + 1) % 3));
+      const std::vector<char> at_pinch = sel;
+      if (adj.empty()) {
+        adj.resize(nv);
+        for (int f = 0; f < F.rows(); ++f)
+          for (int k = 0; k < 3; ++k) adj[F(f, k)].push_back(F(f, (k + 1) % 3));
+      }
       while (!stack.empty()) {
         const int v = stack.back();
         stack.pop_back();
@@ -307,8 +310,6 @@ int open_pinch(const MatX3d& X, const MatX3i& F, const Charts& c, const VertexCh
             stack.push_back(w);
           }
       }
-      std::vector<char> at_pinch(nv, 0);
-      for (int v : pinch) at_pinch[v] = 1;
       double out = 0;
       for (int f = 0; f < F.rows(); ++f) {
         if (c.of_face[f] != chart) continue;

@@ -164,7 +164,6 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
         if (static_cast<int>(samples.size()) > before) {
           ns = static_cast<int>(samples.size());
           sample_dist.resize(ns);
-          double mean;
           measure(sample_max, mean, &owner);
           best_max = std::max(best_max, sample_max);
           focus_stalled = 0;

@@ -148,15 +148,17 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     // A neighbour on the same sharp edge: the quad edge's midpoint is on it, or both ends are, on
     // one chain, at most 1.5 x the quad edge's length apart along it (the quad edge cuts a bend).
     geometry::SharpChainPositions::Position pv, pu;
-    const bool located = chains.locate(tree, adj, x, 0.1 * elen, pv);
+    int located = -1;  // v's position on a chain: -1 not looked up yet (only when a midpoint is off)
     int count = 0;
     for (int u : nb[v]) {
       if (!fixed[u]) continue;
       const Vec3 y = r.V.row(u).transpose();
       const Vec3 mid = 0.5 * (x + y);
-      if (!geometry::near_sharp_edge(target, sharp, adj, tree, mid, 0.05 * elen) &&
-          !(located && chains.locate(tree, adj, y, 0.1 * elen, pu) && chains.distance(pv, pu) <= 1.5 * (y - x).norm()))
-        continue;
+      if (!geometry::near_sharp_edge(target, sharp, adj, tree, mid, 0.05 * elen)) {
+        if (located < 0) located = chains.locate(tree, adj, x, 0.1 * elen, pv);
+        if (!(located && chains.locate(tree, adj, y, 0.1 * elen, pu) && chains.distance(pv, pu) <= 1.5 * (y - x).norm()))
+          continue;
+      }
       (count++ == 0 ? a : b) = u;
     }
     return count == 2;
