@@ -159,6 +159,10 @@ int main(int argc, char** argv) {
                "convergence; for comparison)");
   app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
       ->capture_default_str()->check(CLI::Range(1, 100));
+  app.add_option("--sqp-tolerance", d.sqp_tolerance,
+                 "Polycube deformation: a schedule step also ends when a full SQP step lowers the energy by less "
+                 "than this fraction (0 = the paper's error test alone; -1: 3e-5 for volumes, 0 in surface mode)")
+      ->capture_default_str()->check(CLI::Range(-1.0, 1.0));
   app.add_option("--max-iterations", d.max_inner_iterations, "Polycube deformation: SQP iterations per schedule step at most")
       ->capture_default_str()->check(CLI::Range(1, 10000));
   app.add_option("--target-quality", d.target_quality,
@@ -246,6 +250,14 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 100000000));
   app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  app.add_option("--sharp-angle", hx.sharp_angle_deg,
+                 "Hex and quad meshes: dihedral angle (degrees) above which an input edge is a sharp feature that "
+                 "boundary vertices keep to and slide along")
+      ->capture_default_str()->check(CLI::Range(1.0, 179.0));
+  app.add_option("--crease-angle", opt.quad.capture_angle_deg,
+                 "Quad mesh: a chain of sharp edges is a crease to capture (quad edges moved onto it) when one "
+                 "of its edges is sharper than this (degrees)")
+      ->capture_default_str()->check(CLI::Range(1.0, 179.0));
   bool no_creases = false;
   app.add_flag("--no-crease-capture", no_creases,
                "Quad mesh: do not move quad edges onto the creases of the input that no polycube edge follows");
@@ -262,6 +274,7 @@ int main(int argc, char** argv) {
   if (no_rotation) opt.deform.global_rotation = false;
   if (plain_hessian) opt.deform.lagrangian_hessian = false;
   if (no_creases) opt.quad.capture_creases = false;
+  opt.quad.sharp_angle_deg = hx.sharp_angle_deg;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
   hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size

@@ -1,4 +1,5 @@
 // The l1 polycube deformation on shapes with known answers.
+#include <algorithm>
 #include <memory>
 #include <random>
 
@@ -66,6 +67,28 @@ TEST(Deform, SphereBecomesASixChartPolycube) {
   // A convergence record per iteration, with decreasing error over the run.
   ASSERT_EQ(static_cast<int>(r.history.size()), r.iterations);
   EXPECT_LT(r.history.back().l1_quality, r.history.front().l1_quality);
+}
+
+TEST(Deform, TheSqpConvergenceTestEndsScheduleStepsEarlierWithTheSameResult) {
+  // A schedule step ends when a full SQP step barely lowers the energy (DeformOptions::
+  // sqp_tolerance), not only after five small changes of the error (the paper's test, 0 here).
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 4000);
+  deform::DeformOptions paper;
+  paper.sqp_tolerance = 0;
+  const auto a = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, paper);
+  const auto b = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  ASSERT_TRUE(a.converged);
+  ASSERT_TRUE(b.converged);
+  EXPECT_EQ(a.alpha_steps, b.alpha_steps);
+  EXPECT_LT(b.iterations, 0.8 * a.iterations);
+  // Some schedule step ended after fewer than five iterations, which the error test alone cannot do.
+  std::vector<int> per_step(b.alpha_steps, 0);
+  for (const auto& h : b.history) ++per_step[h.alpha_step];
+  EXPECT_LT(*std::min_element(per_step.begin(), per_step.end() - 1), 5);
+  EXPECT_EQ(b.inverted, 0);
+  EXPECT_EQ(count_charts(b.X, tm.boundary), count_charts(a.X, tm.boundary));
+  EXPECT_NEAR(b.arap, a.arap, 0.02 * a.arap);
 }
 
 TEST(Deform, TorusConverges) {

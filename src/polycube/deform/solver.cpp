@@ -301,6 +301,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   bool factor_valid = false, stalled = false;
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
+  const double sqp_tolerance = opt.sqp_tolerance_for(p.surface);
   int total_iterations = 0;
   // The area constraint's multiplier at the last SQP step: its curvature belongs in the SQP
   // Hessian (the Lagrangian's), see DeformOptions::lagrangian_hessian.
@@ -468,6 +469,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         for (size_t k = changes.size() - 5; k < changes.size(); ++k) sum += changes[k];
         if (sum < d0 / 100) break;
       }
+      // ... or the SQP converged for this alpha: a full step that barely lowers the merit energy.
+      if (it >= 1 && accepted == 1.0 && e0.total - et.total < sqp_tolerance * std::abs(e0.total)) break;
       if (move < 1e-9 || q < opt.target_quality) break;
     }
     {

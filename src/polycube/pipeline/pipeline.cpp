@@ -460,7 +460,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"thickness_keep", opt.deform.thickness_keep},
                        {"max_alpha_steps", opt.deform.max_alpha_steps},
                        {"max_inner_iterations", opt.deform.max_inner_iterations},
-                       {"target_quality", opt.deform.target_quality}};
+                       {"target_quality", opt.deform.target_quality},
+                       {"sqp_tolerance", opt.deform.sqp_tolerance_for(opt.surface)}};
       report["polycube"] = pj;
       if (dr.inverted > 0)
         throw Error(ErrorKind::Internal, "the deformation produced " + std::to_string(dr.inverted) + " inverted tets");
