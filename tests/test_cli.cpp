@@ -262,6 +262,36 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
 }
 
+TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {
+  // The box with a hole has 90-degree edges: sharp features at the default 30 degrees, none at 100.
+  std::string out = temp_dir("feature_angles");
+  RunResult r = run_cli("--example box_hole --surface --quad --quads 300 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_DOUBLE_EQ(j["quad"]["options"]["sharp_angle_deg"].get<double>(), 30.0);
+  EXPECT_GT(j["quad"]["feature_vertices"].get<int>(), 0);
+  EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 0.0);  // surface default
+  r = run_cli("--example box_hole --surface --quad --quads 300 --sharp-angle 100 --crease-angle 120 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(out);
+  EXPECT_DOUBLE_EQ(j["quad"]["options"]["sharp_angle_deg"].get<double>(), 100.0);
+  EXPECT_DOUBLE_EQ(j["quad"]["options"]["crease_angle_deg"].get<double>(), 120.0);
+  EXPECT_EQ(j["quad"]["feature_vertices"].get<int>(), 0);
+  // The SQP convergence test: on by default for volumes, fewer iterations than the error test alone.
+  r = run_cli("--example sphere --until deform -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(out);
+  EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 3e-5);
+  const int fast = j["polycube"]["iterations"].get<int>();
+  r = run_cli("--example sphere --until deform --sqp-tolerance 0 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(out);
+  EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 0.0);
+  EXPECT_LT(fast, j["polycube"]["iterations"].get<int>());
+  EXPECT_EQ(run_cli("--example sphere --until deform --sqp-tolerance 2 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example sphere --until deform --sharp-angle 0 -q -o " + out).code, 2);
+}
+
 namespace {
 // Boundary faces of a polycube tet mesh read back: each has one coordinate along its label's axis.
 double planarity_spread(const MeshData& m, const std::vector<int>& labels) {

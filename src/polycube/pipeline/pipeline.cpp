@@ -738,6 +738,12 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"smooth_moves", qr.smooth_moves},
                           {"search_moves", qr.search_moves},
                           {"fit", fit_json(qr.fit, box.diagonal().norm())},
+                          {"options", {{"sharp_angle_deg", opt.quad.sharp_angle_deg},
+                                       {"crease_angle_deg", opt.quad.capture_angle_deg},
+                                       {"capture_creases", opt.quad.capture_creases},
+                                       {"smooth_iterations", opt.quad.smooth_iterations},
+                                       {"fit_rounds", opt.quad.fit.rounds},
+                                       {"fit_floor", opt.quad.fit.quality_floor}}},
                           {"creases", {{"runs", qr.crease_runs},
                                        {"captured", qr.crease_captured},
                                        {"moved_vertices", qr.crease_moved},
@@ -827,7 +833,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
                          {"thin_steps", opt.hex.merge_thin_steps}, {"fit_rounds", opt.hex.fit.rounds},
-                         {"fit_floor", opt.hex.fit.quality_floor}};
+                         {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg}};
         hj["seconds"] = sh.seconds();
         report["hex"] = hj;
         report["timings"]["hex"] = sh.seconds();
