@@ -142,6 +142,13 @@ int main(int argc, char** argv) {
                  "Polycube deformation: weight of the log barrier on tet volumes, or on triangle areas in surface "
                  "mode (0 = off, as in the paper)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option_function<std::string>(
+         "--volume-barrier-form",
+         [&d](const std::string& form) { d.neutral_volume_barrier = form == "neutral"; },
+         "Polycube deformation: log = -w log J per tet (default), which pushes every tet to grow and rounds "
+         "the shape at small alpha; neutral = w (J - 1 - log J), no pull on tets of unchanged volume")
+      ->default_str("log")
+      ->check(CLI::IsMember({"neutral", "log"}));
   app.add_option("--thickness", d.thickness_weight,
                  "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "
                  "apart (0 = off)")

@@ -282,12 +282,17 @@ TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {
   ASSERT_EQ(r.code, 0) << r.output;
   j = report(out);
   EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 3e-5);
+  EXPECT_EQ(j["polycube"]["options"]["volume_barrier_form"], "log");
   const int fast = j["polycube"]["iterations"].get<int>();
-  r = run_cli("--example sphere --until deform --sqp-tolerance 0 -q -o " + out);
+  const double arap = j["polycube"]["arap_distortion"].get<double>();
+  r = run_cli("--example sphere --until deform --sqp-tolerance 0 --volume-barrier-form neutral -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   j = report(out);
   EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 0.0);
+  EXPECT_EQ(j["polycube"]["options"]["volume_barrier_form"], "neutral");
   EXPECT_LT(fast, j["polycube"]["iterations"].get<int>());
+  EXPECT_NE(arap, j["polycube"]["arap_distortion"].get<double>());
+  EXPECT_EQ(run_cli("--example sphere --until deform --volume-barrier-form cubic -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example sphere --until deform --sqp-tolerance 2 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example sphere --until deform --sharp-angle 0 -q -o " + out).code, 2);
 }

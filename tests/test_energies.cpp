@@ -320,13 +320,31 @@ TEST(Energies, BorderL1GradientPsdAndKnownValues) {
 TEST(Energies, VolumeBarrierGradientAndPsd) {
   Small s = small_mesh();
   ArapRest rest = ArapRest::build(s.X0, s.T);
-  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
-    return volume_barrier_energy(X, s.T, rest, 0.3, g, H);
-  };
-  expect_gradient(E, s.X);
-  expect_psd(hessian(E, s.X));
-  EXPECT_NEAR(E(s.X0, nullptr, nullptr), 0, 1e-14);
-  EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), -0.3 * std::log(8.0), 1e-12);
+  for (bool neutral : {true, false}) {
+    SCOPED_TRACE(neutral ? "J - 1 - log J" : "-log J");
+    EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+      return volume_barrier_energy(X, s.T, rest, 0.3, g, H, nullptr, neutral);
+    };
+    expect_gradient(E, s.X);
+    expect_psd(hessian(E, s.X));
+    EXPECT_NEAR(E(s.X0, nullptr, nullptr), 0, 1e-14);
+    // Uniform scaling by 2: J = 8 in every tet (the weights sum to 1).
+    EXPECT_NEAR(E(2.0 * s.X0, nullptr, nullptr), 0.3 * ((neutral ? 7.0 : 0.0) - std::log(8.0)), 1e-12);
+    // At rest the neutral form pulls on nothing; the log form pushes every tet to grow.
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(s.X0.size());
+    E(s.X0, &g, nullptr);
+    if (neutral) {
+      EXPECT_LT(g.cwiseAbs().maxCoeff(), 1e-13);
+    } else {
+      EXPECT_GT(g.cwiseAbs().maxCoeff(), 1e-3);
+      // Growing every tet lowers it: the gradient points against a uniform dilation about the centroid.
+      const Eigen::RowVector3d c = s.X0.colwise().mean();
+      MatX3d D = s.X0.rowwise() - c;
+      EXPECT_LT(g.dot(Eigen::Map<const Eigen::VectorXd>(D.data(), D.size())), -1e-3);
+    }
+  }
+  // The default is the -log J form.
+  EXPECT_NEAR(volume_barrier_energy(2.0 * s.X0, s.T, rest, 0.3, nullptr, nullptr), -0.3 * std::log(8.0), 1e-12);
 }
 
 TEST(Energies, VolumeBarrierPerTetMultipliers) {

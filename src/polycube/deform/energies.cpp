@@ -402,7 +402,7 @@ std::vector<std::array<int, 2>> border_edges(const MatX3i& F) {
 }
 
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
-                             Eigen::VectorXd* grad, HessianSink* hess, const std::vector<double>* boost) {
+                             Eigen::VectorXd* grad, HessianSink* hess, const std::vector<double>* boost, bool neutral) {
   POLYCUBE_ASSERT(!boost || boost->size() == static_cast<size_t>(T.rows()), "one barrier multiplier per tet");
   double E = 0;
   for (int t = 0; t < T.rows(); ++t) {
@@ -414,14 +414,22 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     const Eigen::Matrix3d Fm = Ds * Di;
     const double J = Fm.determinant();
     if (!(J > 0)) return std::numeric_limits<double>::infinity();
-    E -= wt * std::log(J);
+    if (neutral)
+      E += wt * (J - 1.0 - std::log(J));
+    else
+      E -= wt * std::log(J);
     if (!grad && !hess) continue;
     // dJ/dF = cof(F) = J F^-T; dF/dx_p = (row p of B) as in arap_energy.
     const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
     const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
     Eigen::Matrix<double, 12, 1> dJ;
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
-    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * wt / J * dJ));
+    if (grad) {
+      if (neutral)
+        scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * wt * (1.0 - 1.0 / J) * dJ));
+      else
+        scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * wt / J * dJ));
+    }
     if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
   }
   return weight * E;

@@ -118,7 +118,8 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
     }
   }
   if (p.volume_weight > 0) {
-    e.volume = volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H, p.boost.empty() ? nullptr : &p.boost);
+    e.volume = volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H, p.boost.empty() ? nullptr : &p.boost,
+                                     p.opt.neutral_volume_barrier);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;

@@ -455,6 +455,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["options"] = {{"alpha0", opt.deform.alpha0}, {"eps0", opt.deform.eps0}, {"eps_min", opt.deform.eps_min},
                        {"beta", opt.deform.beta}, {"barrier_weight", barrier_weight},
                        {"volume_barrier", opt.deform.volume_barrier_weight},
+                       {"volume_barrier_form", opt.deform.neutral_volume_barrier ? "neutral" : "log"},
                        {"volume_boost", opt.deform.volume_boost_factor},
                        {"thickness", opt.deform.thickness_weight},
                        {"thickness_keep", opt.deform.thickness_keep},
