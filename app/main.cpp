@@ -147,7 +147,7 @@ int main(int argc, char** argv) {
          [&d](const std::string& form) { d.neutral_volume_barrier = form == "neutral"; },
          "Polycube deformation: log = -w log J per tet (default), which pushes every tet to grow and rounds "
          "the shape at small alpha; neutral = w (J - 1 - log J), no pull on tets of unchanged volume")
-      ->default_str("log")
+      ->default_str(d.neutral_volume_barrier ? "neutral" : "log")
       ->check(CLI::IsMember({"neutral", "log"}));
   app.add_option("--thickness", d.thickness_weight,
                  "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "

@@ -425,10 +425,9 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
     Eigen::Matrix<double, 12, 1> dJ;
     for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
     if (grad) {
-      if (neutral)
-        scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * wt * (1.0 - 1.0 / J) * dJ));
-      else
-        scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight * wt / J * dJ));
+      // phi'(J) times the weights (the -log J form in its original order of operations).
+      const double dphi = neutral ? weight * wt * (1.0 - 1.0 / J) : -weight * wt / J;
+      scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(dphi * dJ));
     }
     if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
   }
