@@ -3,6 +3,8 @@
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 
 namespace polycube {
 
@@ -13,5 +15,87 @@ void set_blas_threads(int n) {
   static const auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
   if (f) f(n);
 }
+
+namespace detail {
+
+// Handshake: `posted` counts tasks given to the worker, `done` tasks it has finished. Both sides
+// spin for a while before sleeping on the atomic (a futex): the sweeps' tasks follow each other
+// within a millisecond, and a futex wake-up costs tens of microseconds on a virtual machine. The
+// spin is bounded, so that an idle worker does not take the core from the BLAS's threads during a
+// factorization.
+struct PairWorker::State {
+  std::atomic<bool> claimed{false};
+  std::atomic<unsigned> posted{0}, done{0};
+  std::atomic<bool> stop{false};
+  void (*fn)(void*) = nullptr;
+  void* arg = nullptr;
+  std::thread thread;
+};
+
+namespace {
+
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
+// Spins until value != seen or about `micros` have passed; then sleeps until it changes.
+void await_change(const std::atomic<unsigned>& value, unsigned seen, int micros) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(micros);
+  for (int i = 0;; ++i) {
+    if (value.load(std::memory_order_acquire) != seen) return;
+    if ((i & 63) == 63 && std::chrono::steady_clock::now() > until) break;
+    cpu_relax();
+  }
+  while (value.load(std::memory_order_acquire) == seen) value.wait(seen, std::memory_order_acquire);
+}
+
+}  // namespace
+
+PairWorker& PairWorker::instance() {
+  static PairWorker w;
+  return w;
+}
+
+PairWorker::PairWorker() : s_(new State) { s_->thread = std::thread([this] { loop(); }); }
+
+PairWorker::~PairWorker() {
+  s_->stop.store(true);
+  s_->posted.fetch_add(1, std::memory_order_release);
+  s_->posted.notify_one();
+  s_->thread.join();
+  delete s_;
+}
+
+void PairWorker::loop() {
+  unsigned seen = 0;
+  for (;;) {
+    await_change(s_->posted, seen, 1000);
+    seen = s_->posted.load(std::memory_order_acquire);
+    if (s_->stop.load()) return;
+    s_->fn(s_->arg);
+    s_->done.store(seen, std::memory_order_release);
+    s_->done.notify_one();
+  }
+}
+
+bool PairWorker::claim() { return !s_->claimed.exchange(true, std::memory_order_acquire); }
+
+void PairWorker::start(void (*fn)(void*), void* arg) {
+  s_->fn = fn;
+  s_->arg = arg;
+  s_->posted.fetch_add(1, std::memory_order_release);
+  s_->posted.notify_one();
+}
+
+void PairWorker::wait() {
+  const unsigned target = s_->posted.load(std::memory_order_relaxed);
+  for (unsigned d = s_->done.load(std::memory_order_acquire); d != target; d = s_->done.load(std::memory_order_acquire))
+    await_change(s_->done, d, 2000);
+  s_->claimed.store(false, std::memory_order_release);
+}
+
+}  // namespace detail
 
 }  // namespace polycube

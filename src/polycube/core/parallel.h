@@ -13,9 +13,31 @@ int hardware_threads();
 /// any other BLAS works too); no effect otherwise.
 void set_blas_threads(int n);
 
+namespace detail {
+/// The second core's persistent worker. Starting a thread per task cost 0.2-0.3 ms on this
+/// project's virtual machine, against tasks of 1-3 ms (the preconditioner's sweeps, several per CG
+/// iteration). One task at a time: claim() returns false while another caller holds the worker
+/// (run_pair from inside a run_pair task), and that caller then starts a thread as before.
+class PairWorker {
+ public:
+  static PairWorker& instance();
+  bool claim();
+  /// Runs fn(arg) on the worker; wait() returns once it has finished. Only after claim().
+  void start(void (*fn)(void*), void* arg);
+  void wait();  // also releases the claim
+ private:
+  PairWorker();
+  ~PairWorker();
+  void loop();
+  struct State;
+  State* s_;
+};
+}  // namespace detail
+
 /// Runs f(0) on this thread and f(1) on another when the machine has two cores (one after the
 /// other otherwise), with a single-threaded BLAS meanwhile (restored to hardware_threads() after).
-/// An exception of either task is rethrown after both have finished.
+/// An exception of either task is rethrown after both have finished. f(1) runs on a persistent
+/// worker thread when that is free, on a new thread otherwise.
 template <class F>
 void run_pair(F&& f) {
   if (hardware_threads() < 2) {
@@ -25,22 +47,35 @@ void run_pair(F&& f) {
   }
   set_blas_threads(1);
   std::exception_ptr failure;
-  std::thread other([&] {
+  auto second = [&] {
     try {
       f(1);
     } catch (...) {
       failure = std::current_exception();
     }
-  });
+  };
+  using Second = decltype(second);
+  auto& worker = detail::PairWorker::instance();
+  const bool pooled = worker.claim();
+  std::thread other;
+  if (pooled)
+    worker.start([](void* a) { (*static_cast<Second*>(a))(); }, &second);
+  else
+    other = std::thread(second);
+  auto join = [&] {
+    if (pooled)
+      worker.wait();
+    else
+      other.join();
+    set_blas_threads(hardware_threads());
+  };
   try {
     f(0);
   } catch (...) {
-    other.join();
-    set_blas_threads(hardware_threads());
+    join();
     throw;
   }
-  other.join();
-  set_blas_threads(hardware_threads());
+  join();
   if (failure) std::rethrow_exception(failure);
 }
 

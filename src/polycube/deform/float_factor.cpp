@@ -104,84 +104,138 @@ inline __attribute__((always_inline)) void dot4x2(const float* __restrict x, int
   }
 }
 
+// Four columns (x, x + n, x + 2 n, x + 3 n, one contiguous block) times a0[0..4) and a1[0..4),
+// subtracted from y0 and y1: one load and store of y0 and y1 serves four columns.
+inline __attribute__((always_inline)) void axpy4x2(float* __restrict y0, float* __restrict y1, const float* __restrict x,
+                                                   const float* a0, const float* a1, int n) {
+  const float b00 = a0[0], b01 = a0[1], b02 = a0[2], b03 = a0[3];
+  const float b10 = a1[0], b11 = a1[1], b12 = a1[2], b13 = a1[3];
+  const long n2 = 2L * n, n3 = 3L * n;
+  int i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const v8f x0 = load8(x + i), x1 = load8(x + n + i), x2 = load8(x + n2 + i), x3 = load8(x + n3 + i);
+    v8f u = load8(y0 + i), w = load8(y1 + i);
+    u -= b00 * x0;
+    w -= b10 * x0;
+    u -= b01 * x1;
+    w -= b11 * x1;
+    u -= b02 * x2;
+    w -= b12 * x2;
+    u -= b03 * x3;
+    w -= b13 * x3;
+    store8(y0 + i, u);
+    store8(y1 + i, w);
+  }
+  for (; i < n; ++i) {
+    float u = y0[i], w = y1[i];
+    for (int c = 0; c < 4; ++c) {
+      u -= a0[c] * x[static_cast<long>(c) * n + i];
+      w -= a1[c] * x[static_cast<long>(c) * n + i];
+    }
+    y0[i] = u;
+    y1[i] = w;
+  }
+}
+
+// The float copy's layout (see FloatFactor::assign): per supernode of nscol columns and nsrow rows,
+// first the rows below the diagonal block (m = nsrow - nscol rows, column-major, leading dimension
+// m), then the strictly lower triangle of the diagonal block, packed by columns (column j: rows
+// j + 1 .. nscol - 1). Both sweeps then read each part front to back: the prefetchers see one
+// stream per part instead of one per column, and the diagonal block's unused upper half is not
+// stored.
+inline long tri_offset(int nscol, int j) { return static_cast<long>(j) * (nscol - 1) - static_cast<long>(j) * (j - 1) / 2; }
+
 // L y = y (permuted vectors) over a range of supernodes, for two right-hand sides at once (the
-// factor is read once for both: the sweeps are bound by memory bandwidth): each supernode's rows
-// are gathered into t, solved against its dense lower-trapezoidal block column by column, and
+// factor is read once for both: the sweeps are bound by memory access): each supernode's diagonal
+// block is solved column by column, then its rows below are updated four columns at a time and
 // scattered back. `owner` gives, per column, the part it belongs to; the sweep of part `part` adds
 // its updates of other parts' rows (its ancestors, always in the top part) into `extra` instead of
 // y when extra is given.
 POLYCUBE_MULTIVERSION
-void forward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
+void forward2(int s_begin, int s_end, const int* super, const int* pi, const long* off, const int* srows,
               const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1, const signed char* owner,
               int part, float* extra0, float* extra1) {
   for (int s = s_begin; s < s_end; ++s) {
     const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi;
-    const float* L = X + px[s];
-    const int* rows = srows + psi;
+    const int psi = pi[s], nsrow = pi[s + 1] - psi, m = nsrow - nscol;
+    const float* R = X + off[s];
+    const float* T = R + static_cast<long>(m) * nscol;
+    const int* rows = srows + psi + nscol;
+    float* u0 = t0 + nscol;
+    float* u1 = t1 + nscol;
     for (int i = 0; i < nscol; ++i) {
       t0[i] = y0[k1 + i];
       t1[i] = y1[k1 + i];
     }
-    std::fill(t0 + nscol, t0 + nsrow, 0.0f);
-    std::fill(t1 + nscol, t1 + nsrow, 0.0f);
     for (int j = 0; j < nscol; ++j) {
       const float a0 = t0[j] * dinv[k1 + j], a1 = t1[j] * dinv[k1 + j];
       t0[j] = a0;
       t1[j] = a1;
-      axpy2(t0 + j + 1, t1 + j + 1, L + static_cast<long>(j) * nsrow + j + 1, -a0, -a1, nsrow - j - 1);
+      axpy2(t0 + j + 1, t1 + j + 1, T + tri_offset(nscol, j), -a0, -a1, nscol - j - 1);
     }
     for (int i = 0; i < nscol; ++i) {
       y0[k1 + i] = t0[i];
       y1[k1 + i] = t1[i];
     }
-    for (int i = nscol; i < nsrow; ++i) {
+    if (m == 0) continue;
+    std::fill(u0, u0 + m, 0.0f);
+    std::fill(u1, u1 + m, 0.0f);
+    int j = 0;
+    for (; j + 4 <= nscol; j += 4) axpy4x2(u0, u1, R + static_cast<long>(j) * m, t0 + j, t1 + j, m);
+    for (; j < nscol; ++j) axpy2(u0, u1, R + static_cast<long>(j) * m, -t0[j], -t1[j], m);
+    for (int i = 0; i < m; ++i) {
       const int r = rows[i];
       if (extra0 && owner[r] != part) {
-        extra0[r] += t0[i];
-        extra1[r] += t1[i];
+        extra0[r] += u0[i];
+        extra1[r] += u1[i];
       } else {
-        y0[r] += t0[i];
-        y1[r] += t1[i];
+        y0[r] += u0[i];
+        y1[r] += u1[i];
       }
     }
   }
 }
 
 // L^T y = y over a range of supernodes in reverse order, two right-hand sides: the rows below each
-// diagonal block first, columns in increasing order, four at a time (the factor read forwards, as
-// the prefetchers like: descending columns made this sweep twice the forward one's time), then the
-// triangle of the diagonal block backwards.
+// diagonal block first, four columns at a time, then the triangle of the diagonal block backwards.
 POLYCUBE_MULTIVERSION
-void backward2(int s_begin, int s_end, const int* super, const int* pi, const int* px, const int* srows,
+void backward2(int s_begin, int s_end, const int* super, const int* pi, const long* off, const int* srows,
                const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1) {
   for (int s = s_end - 1; s >= s_begin; --s) {
     const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi;
-    const float* L = X + px[s];
-    const int* rows = srows + psi;
-    for (int i = 0; i < nsrow; ++i) {
-      t0[i] = y0[rows[i]];
-      t1[i] = y1[rows[i]];
+    const int psi = pi[s], nsrow = pi[s + 1] - psi, m = nsrow - nscol;
+    const float* R = X + off[s];
+    const float* T = R + static_cast<long>(m) * nscol;
+    const int* rows = srows + psi + nscol;
+    float* g0 = t0 + nscol;
+    float* g1 = t1 + nscol;
+    for (int i = 0; i < nscol; ++i) {
+      t0[i] = y0[k1 + i];
+      t1[i] = y1[k1 + i];
+    }
+    for (int i = 0; i < m; ++i) {
+      g0[i] = y0[rows[i]];
+      g1[i] = y1[rows[i]];
     }
     float d0, d1;
     int j = 0;
-    for (; j + 4 <= nscol; j += 4) {
-      float d[8];
-      dot4x2(L + static_cast<long>(j) * nsrow + nscol, nsrow, t0 + nscol, t1 + nscol, nsrow - nscol, d);
-      for (int c = 0; c < 4; ++c) {
-        t0[j + c] -= d[c];
-        t1[j + c] -= d[4 + c];
+    if (m > 0) {
+      for (; j + 4 <= nscol; j += 4) {
+        float d[8];
+        dot4x2(R + static_cast<long>(j) * m, m, g0, g1, m, d);
+        for (int c = 0; c < 4; ++c) {
+          t0[j + c] -= d[c];
+          t1[j + c] -= d[4 + c];
+        }
+      }
+      for (; j < nscol; ++j) {
+        dot2(R + static_cast<long>(j) * m, g0, g1, m, d0, d1);
+        t0[j] -= d0;
+        t1[j] -= d1;
       }
     }
-    for (; j < nscol; ++j) {
-      dot2(L + static_cast<long>(j) * nsrow + nscol, t0 + nscol, t1 + nscol, nsrow - nscol, d0, d1);
-      t0[j] -= d0;
-      t1[j] -= d1;
-    }
     for (int j = nscol - 1; j >= 0; --j) {
-      const float* col = L + static_cast<long>(j) * nsrow;
-      dot2(col + j + 1, t0 + j + 1, t1 + j + 1, nscol - j - 1, d0, d1);
+      dot2(T + tri_offset(nscol, j), t0 + j + 1, t1 + j + 1, nscol - j - 1, d0, d1);
       t0[j] = (t0[j] - d0) * dinv[k1 + j];
       t1[j] = (t1[j] - d1) * dinv[k1 + j];
     }
@@ -207,7 +261,6 @@ bool FloatFactor::assign(const cholmod_factor* L) {
   const int* perm = static_cast<const int*>(L->Perm);
   super_.assign(super, super + nsuper + 1);
   pi_.assign(pi, pi + nsuper + 1);
-  px_.assign(px, px + nsuper + 1);
   s_.assign(srows, srows + pi[nsuper]);
   if (perm)
     perm_.assign(perm, perm + n);
@@ -216,13 +269,25 @@ bool FloatFactor::assign(const cholmod_factor* L) {
     for (int i = 0; i < n; ++i) perm_[i] = i;
   }
   const double* x = static_cast<const double*>(L->x);
-  x_.resize(static_cast<size_t>(px[nsuper]));
-  std::transform(x, x + px[nsuper], x_.begin(), [](double v) { return static_cast<float>(v); });
+  off_.resize(nsuper + 1);
+  off_[0] = 0;
+  for (int s = 0; s < nsuper; ++s) {
+    const long nscol = super[s + 1] - super[s], nsrow = pi[s + 1] - pi[s];
+    off_[s + 1] = off_[s] + (nsrow - nscol) * nscol + nscol * (nscol - 1) / 2;
+  }
+  x_.resize(static_cast<size_t>(off_[nsuper]));
   dinv_.resize(n);
   for (int s = 0; s < nsuper; ++s) {
-    const int nsrow = pi[s + 1] - pi[s];
-    for (int j = 0; j < super[s + 1] - super[s]; ++j)
-      dinv_[super[s] + j] = static_cast<float>(1.0 / x[px[s] + static_cast<long>(j) * nsrow + j]);
+    const int nscol = super[s + 1] - super[s], nsrow = pi[s + 1] - pi[s], m = nsrow - nscol;
+    const double* Ls = x + px[s];
+    float* R = x_.data() + off_[s];
+    float* T = R + static_cast<long>(m) * nscol;
+    for (int j = 0; j < nscol; ++j) {
+      const double* col = Ls + static_cast<long>(j) * nsrow;
+      dinv_[super[s] + j] = static_cast<float>(1.0 / col[j]);
+      std::transform(col + j + 1, col + nscol, T + tri_offset(nscol, j), [](double v) { return static_cast<float>(v); });
+      std::transform(col + nscol, col + nsrow, R + static_cast<long>(j) * m, [](double v) { return static_cast<float>(v); });
+    }
   }
   max_rows_ = 0;
   for (int s = 0; s < nsuper; ++s) max_rows_ = std::max(max_rows_, pi[s + 1] - pi[s]);
@@ -339,7 +404,7 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
   };
   both([&](int th) {
     for (const auto& r : ranges_[th])
-      forward2(r[0], r[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0], t[th][1],
+      forward2(r[0], r[1], sup, pi_.data(), off_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0], t[th][1],
                owner_.data(), th, th == 1 ? e0 : nullptr, th == 1 ? e1 : nullptr);
   });
   for (const auto& r : top_ranges_)
@@ -348,13 +413,13 @@ void FloatFactor::solve2(const double* b0, const double* b1, double* x0, double*
       y1[k] += e1[k];
     }
   for (const auto& r : top_ranges_)
-    forward2(r[0], r[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1],
+    forward2(r[0], r[1], sup, pi_.data(), off_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1],
              owner_.data(), 2, nullptr, nullptr);
   for (auto r = top_ranges_.rbegin(); r != top_ranges_.rend(); ++r)
-    backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1]);
+    backward2((*r)[0], (*r)[1], sup, pi_.data(), off_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[0][0], t[0][1]);
   both([&](int th) {
     for (auto r = ranges_[th].rbegin(); r != ranges_[th].rend(); ++r)
-      backward2((*r)[0], (*r)[1], sup, pi_.data(), px_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0],
+      backward2((*r)[0], (*r)[1], sup, pi_.data(), off_.data(), s_.data(), x_.data(), dinv_.data(), y0, y1, t[th][0],
                 t[th][1]);
   });
   for (size_t k = 0; k < n; ++k) {
