@@ -50,11 +50,16 @@ std::mutex& analysis_mutex() {
 }
 void analyze(Cholmod& s, const SpMat& A) {
   const std::lock_guard<std::mutex> lock(analysis_mutex());
+  const SerialOpenMP serial_openmp;
   s.analyzePattern(A);
+}
+void factorize(Cholmod& s, const SpMat& A) {
+  const SerialOpenMP serial_openmp;
+  s.factorize(A);
 }
 void analyze_and_factorize(Cholmod& s, const SpMat& A) {
   analyze(s, A);
-  s.factorize(A);
+  factorize(s, A);
 }
 
 // Volume ratio J = det(F) of tet t (rest -> X) and its gradient over the tet's 12 coordinates.
@@ -855,7 +860,7 @@ class Realizer {
         // Damped more until it factorizes (the cap above mostly suffices).
         double damping = reg;
         for (int tries = 0;; ++tries, damping *= 100) {
-          chol->factorize(H + damping * I);
+          factorize(*chol, H + damping * I);
           if (chol->info() == Eigen::Success) break;
           if (tries == 8) {
             hooks_.debug("penalty path: the Newton matrix is not positive definite");

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <mutex>
 
 namespace polycube {
 
@@ -14,6 +15,38 @@ void set_blas_threads(int n) {
   using SetThreads = void (*)(int);
   static const auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
   if (f) f(n);
+}
+
+namespace {
+struct OpenMPLevels {
+  std::mutex mutex;
+  int depth = 0, saved = 0;
+  using Get = int (*)();
+  using Set = void (*)(int);
+  Get get = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "omp_get_max_active_levels"));
+  Set set = reinterpret_cast<Set>(dlsym(RTLD_DEFAULT, "omp_set_max_active_levels"));
+};
+OpenMPLevels& openmp_levels() {
+  static OpenMPLevels l;
+  return l;
+}
+}  // namespace
+
+SerialOpenMP::SerialOpenMP() {
+  auto& l = openmp_levels();
+  if (!l.get || !l.set) return;
+  const std::lock_guard<std::mutex> lock(l.mutex);
+  if (l.depth++ == 0) {
+    l.saved = l.get();
+    l.set(0);  // no active parallel region: every team has one thread
+  }
+}
+
+SerialOpenMP::~SerialOpenMP() {
+  auto& l = openmp_levels();
+  if (!l.get || !l.set) return;
+  const std::lock_guard<std::mutex> lock(l.mutex);
+  if (--l.depth == 0) l.set(l.saved);
 }
 
 namespace detail {

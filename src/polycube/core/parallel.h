@@ -13,6 +13,21 @@ int hardware_threads();
 /// any other BLAS works too); no effect otherwise.
 void set_blas_threads(int n);
 
+/// While an instance exists (in any thread), OpenMP parallel regions run on one thread; the setting
+/// before the first instance returns when the last one ends. For CHOLMOD's factorizations: the
+/// Debian build (SuiteSparse 5) opens teams with a compiled-in num_threads(4), which
+/// omp_set_num_threads cannot lower, for loops as small as zeroing one supernode, so every
+/// factorization ran four OpenMP threads beside OpenBLAS's two on two cores (fandisk, 39k tets,
+/// 6 factorizations: 2.2-2.3 s with the teams, 1.3-1.6 s without, the same factors). Gmsh's
+/// meshing, outside these scopes, keeps its threads.
+class SerialOpenMP {
+ public:
+  SerialOpenMP();
+  ~SerialOpenMP();
+  SerialOpenMP(const SerialOpenMP&) = delete;
+  SerialOpenMP& operator=(const SerialOpenMP&) = delete;
+};
+
 namespace detail {
 /// The second core's persistent worker. Starting a thread per task cost 0.2-0.3 ms on this
 /// project's virtual machine, against tasks of 1-3 ms (the preconditioner's sweeps, several per CG

@@ -152,6 +152,7 @@ void factorization_blas_threads() {
 
 bool SparseSystem::factorize() {
   factorization_blas_threads();
+  const SerialOpenMP serial_openmp;
   std::copy(values_.begin(), values_.end(), A_.valuePtr());
   if (!analyzed_) {
     llt_ = std::make_unique<CholmodLLT>();
