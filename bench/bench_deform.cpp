@@ -130,6 +130,10 @@ int main(int argc, char** argv) {
   double quad_beta = 0;
   app.add_option("--quad-beta", quad_beta, "With --quad-table: the complexity penalty weight beta of the deformation")
       ->capture_default_str();
+  double sqp_tolerance = -1;
+  app.add_option("--sqp-tolerance", sqp_tolerance,
+                 "DeformOptions::sqp_tolerance for the volume runs (negative: the default for the mode)")
+      ->capture_default_str();
   bool deform_only = false;
   app.add_flag("--deform-only", deform_only,
                "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
@@ -174,6 +178,7 @@ int main(int argc, char** argv) {
       split_boundary_tets(tm);
       std::string p1 = "-", p2 = "-", p3 = "-", p4 = "-", p5 = "-";
       deform::DeformOptions dopt;
+      dopt.sqp_tolerance = sqp_tolerance;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {
         auto& c = paper[m.paper_row];
         p1 = c[1];
