@@ -145,6 +145,26 @@ inline __attribute__((always_inline)) void axpy4x2(float* __restrict y0, float* 
 // stored.
 inline long tri_offset(int nscol, int j) { return static_cast<long>(j) * (nscol - 1) - static_cast<long>(j) * (j - 1) / 2; }
 
+// Supernode s of the float copy: its first column k1, its nscol columns, the m rows below its
+// diagonal block (indices `rows`), the block of those rows R and the packed triangle T.
+struct Supernode {
+  int k1, nscol, m;
+  const float* R;
+  const float* T;
+  const int* rows;
+};
+inline __attribute__((always_inline)) Supernode supernode(int s, const int* super, const int* pi, const long* off,
+                                                          const int* srows, const float* X) {
+  Supernode n;
+  n.k1 = super[s];
+  n.nscol = super[s + 1] - n.k1;
+  n.m = pi[s + 1] - pi[s] - n.nscol;
+  n.R = X + off[s];
+  n.T = n.R + static_cast<long>(n.m) * n.nscol;
+  n.rows = srows + pi[s] + n.nscol;
+  return n;
+}
+
 // L y = y (permuted vectors) over a range of supernodes, for two right-hand sides at once (the
 // factor is read once for both: the sweeps are bound by memory access): each supernode's diagonal
 // block is solved column by column, then its rows below are updated four columns at a time and
@@ -156,11 +176,7 @@ void forward2(int s_begin, int s_end, const int* super, const int* pi, const lon
               const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1, const signed char* owner,
               int part, float* extra0, float* extra1) {
   for (int s = s_begin; s < s_end; ++s) {
-    const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi, m = nsrow - nscol;
-    const float* R = X + off[s];
-    const float* T = R + static_cast<long>(m) * nscol;
-    const int* rows = srows + psi + nscol;
+    const auto [k1, nscol, m, R, T, rows] = supernode(s, super, pi, off, srows, X);
     float* u0 = t0 + nscol;
     float* u1 = t1 + nscol;
     for (int i = 0; i < nscol; ++i) {
@@ -202,11 +218,7 @@ POLYCUBE_MULTIVERSION
 void backward2(int s_begin, int s_end, const int* super, const int* pi, const long* off, const int* srows,
                const float* X, const float* dinv, float* y0, float* y1, float* t0, float* t1) {
   for (int s = s_end - 1; s >= s_begin; --s) {
-    const int k1 = super[s], nscol = super[s + 1] - k1;
-    const int psi = pi[s], nsrow = pi[s + 1] - psi, m = nsrow - nscol;
-    const float* R = X + off[s];
-    const float* T = R + static_cast<long>(m) * nscol;
-    const int* rows = srows + psi + nscol;
+    const auto [k1, nscol, m, R, T, rows] = supernode(s, super, pi, off, srows, X);
     float* g0 = t0 + nscol;
     float* g1 = t1 + nscol;
     for (int i = 0; i < nscol; ++i) {
