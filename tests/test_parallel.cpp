@@ -1,0 +1,87 @@
+// run_pair (the persistent second thread) and SerialOpenMP.
+#include <dlfcn.h>
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <stdexcept>
+#include <thread>
+#include <vector>
+
+#include "polycube/core/parallel.h"
+
+using namespace polycube;
+
+namespace {
+int omp_levels() {
+  using Get = int (*)();
+  static const auto f = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "omp_get_max_active_levels"));
+  return f ? f() : -1;
+}
+}  // namespace
+
+// Both tasks run, on two threads when the machine has two cores, thousands of times in a row
+// (the handshake must not lose a wake-up), with the results visible to the caller afterwards.
+TEST(Parallel, RunPairRunsBothTasksEveryTime) {
+  constexpr int kRounds = 2000;
+  std::vector<long> sums(2, 0);
+  std::atomic<int> distinct{0};
+  for (int round = 0; round < kRounds; ++round) {
+    std::thread::id ids[2];
+    run_pair([&](int k) {
+      sums[k] += round + k;
+      ids[k] = std::this_thread::get_id();
+    });
+    if (ids[0] != ids[1]) ++distinct;
+  }
+  const long expected0 = static_cast<long>(kRounds) * (kRounds - 1) / 2;
+  EXPECT_EQ(sums[0], expected0);
+  EXPECT_EQ(sums[1], expected0 + kRounds);
+  if (hardware_threads() >= 2)
+    EXPECT_EQ(distinct.load(), kRounds);
+  else
+    EXPECT_EQ(distinct.load(), 0);
+}
+
+// A run_pair inside a run_pair task (the realization's two starts each solving with two threads):
+// the worker is taken, so the inner call starts a thread of its own; every task runs once.
+TEST(Parallel, NestedRunPairRunsEveryTask) {
+  std::atomic<int> count{0};
+  for (int round = 0; round < 200; ++round)
+    run_pair([&](int) { run_pair([&](int) { ++count; }); });
+  EXPECT_EQ(count.load(), 800);
+}
+
+// An exception of either task reaches the caller after both finished, and the worker stays usable.
+TEST(Parallel, RunPairRethrowsAndRecovers) {
+  for (int thrower = 0; thrower < 2; ++thrower) {
+    std::atomic<int> finished{0};
+    EXPECT_THROW(run_pair([&](int k) {
+                   if (k == thrower) throw std::runtime_error("task failed");
+                   ++finished;
+                 }),
+                 std::runtime_error);
+    EXPECT_EQ(finished.load(), 1);
+  }
+  int ran = 0;
+  run_pair([&](int k) {
+    if (k == 1) ran = 1;
+  });
+  EXPECT_EQ(ran, 1);
+}
+
+// SerialOpenMP turns OpenMP's active levels to 0 while any instance lives, nested or not, and
+// restores the setting from before the first one.
+TEST(Parallel, SerialOpenMPRestoresTheSetting) {
+  const int before = omp_levels();
+  if (before < 0) GTEST_SKIP() << "no OpenMP runtime loaded";
+  {
+    const SerialOpenMP a;
+    EXPECT_EQ(omp_levels(), 0);
+    {
+      const SerialOpenMP b;
+      EXPECT_EQ(omp_levels(), 0);
+    }
+    EXPECT_EQ(omp_levels(), 0);
+  }
+  EXPECT_EQ(omp_levels(), before);
+}
