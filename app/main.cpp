@@ -149,6 +149,10 @@ int main(int argc, char** argv) {
          "the shape at small alpha; neutral = w (J - 1 - log J), no pull on tets of unchanged volume")
       ->default_str(d.neutral_volume_barrier ? "neutral" : "log")
       ->check(CLI::IsMember({"neutral", "log"}));
+  app.add_flag("--locality-order", d.locality_order,
+               "Polycube deformation (volume): renumber the interior vertices along a Morton curve and sort the "
+               "tets inside the solver, for faster assembly and solves on large meshes (changes the last digits, "
+               "hence the SQP path; the output keeps the input's numbering)");
   app.add_option("--thickness", d.thickness_weight,
                  "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "
                  "apart (0 = off)")

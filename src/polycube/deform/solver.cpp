@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <sstream>
 
@@ -521,10 +522,69 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
 
 }  // namespace
 
+namespace {
+
+// 21 bits of x spread to every third bit.
+inline uint64_t spread_bits(uint64_t x) {
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffULL;
+  x = (x | x << 16) & 0x1f0000ff0000ffULL;
+  x = (x | x << 8) & 0x100f00f00f00f00fULL;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+  x = (x | x << 2) & 0x1249249249249249ULL;
+  return x;
+}
+
+// DeformOptions::locality_order: new id per vertex (the identity on the boundary; the interior
+// vertices' ids handed out again in Morton order of their positions).
+std::vector<int> locality_permutation(const MatX3d& V, const MatX3i& B) {
+  const int n = static_cast<int>(V.rows());
+  std::vector<char> on_boundary(n, 0);
+  for (int f = 0; f < B.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary[B(f, k)] = 1;
+  const Vec3 lo = V.colwise().minCoeff().transpose();
+  const double extent = std::max(1e-300, (V.colwise().maxCoeff().transpose() - lo).maxCoeff());
+  std::vector<int> interior;
+  std::vector<uint64_t> code(n, 0);
+  for (int v = 0; v < n; ++v) {
+    if (on_boundary[v]) continue;
+    interior.push_back(v);
+    for (int a = 0; a < 3; ++a) {
+      const double t = std::clamp((V(v, a) - lo[a]) / extent, 0.0, 1.0);
+      code[v] |= spread_bits(static_cast<uint64_t>(t * 2097151.0)) << a;
+    }
+  }
+  std::vector<int> sorted = interior;
+  std::stable_sort(sorted.begin(), sorted.end(), [&](int a, int b) { return code[a] < code[b]; });
+  std::vector<int> perm(n);
+  for (int v = 0; v < n; ++v) perm[v] = v;
+  for (size_t k = 0; k < interior.size(); ++k) perm[sorted[k]] = interior[k];
+  return perm;
+}
+
+}  // namespace
+
 DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
                                 const Hooks& hooks) {
   POLYCUBE_ASSERT(T.rows() > 0, "deform_to_polycube needs tets (deform_surface_to_polycube for a surface)");
-  return deform(V, T, B, opt, hooks);
+  if (!opt.locality_order) return deform(V, T, B, opt, hooks);
+  const std::vector<int> perm = locality_permutation(V, B);
+  MatX3d V2(V.rows(), 3);
+  for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
+  std::vector<std::array<int, 4>> tets(T.rows());
+  for (int t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) tets[t][k] = perm[T(t, k)];
+  std::stable_sort(tets.begin(), tets.end(), [](const std::array<int, 4>& a, const std::array<int, 4>& b) {
+    return *std::min_element(a.begin(), a.end()) < *std::min_element(b.begin(), b.end());
+  });
+  MatX4i T2(T.rows(), 4);
+  for (int t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) T2(t, k) = tets[t][k];
+  DeformResult r = deform(V2, T2, B, opt, hooks);  // boundary ids are unchanged
+  MatX3d X(V.rows(), 3);
+  for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
+  r.X = std::move(X);
+  return r;
 }
 
 DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const DeformOptions& opt,

@@ -98,6 +98,13 @@ struct DeformOptions {
   /// counts, so that a run does not depend on the machine's load; at least cg_max_iterations).
   double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
+  /// Volume mode: inside the deformation, renumber the interior vertices (those on no boundary
+  /// triangle, among their own ids) along a Morton curve and sort the tets by their smallest
+  /// vertex, so that the assembly's and the solves' scattered accesses stay local; the result is
+  /// given back in the input's numbering. Boundary ids, hence the boundary pairs and user edges,
+  /// are unchanged. Off by default: it changes the order of the sums, hence the last digits and the
+  /// SQP path (rocker at 178k tets: 1.84 -> 1.25 s per SQP iteration, the assembly 314 -> 202 ms).
+  bool locality_order = false;
 };
 
 /// One SQP iteration, for convergence plots like the paper's Fig. 3.

@@ -456,6 +456,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"beta", opt.deform.beta}, {"barrier_weight", barrier_weight},
                        {"volume_barrier", opt.deform.volume_barrier_weight},
                        {"volume_barrier_form", opt.deform.neutral_volume_barrier ? "neutral" : "log"},
+                       {"locality_order", opt.deform.locality_order},
                        {"volume_boost", opt.deform.volume_boost_factor},
                        {"thickness", opt.deform.thickness_weight},
                        {"thickness_keep", opt.deform.thickness_keep},
