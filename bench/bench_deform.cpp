@@ -134,6 +134,8 @@ int main(int argc, char** argv) {
   app.add_option("--sqp-tolerance", sqp_tolerance,
                  "DeformOptions::sqp_tolerance for the volume runs (negative: the default for the mode)")
       ->capture_default_str();
+  bool locality_order = false;
+  app.add_flag("--locality-order", locality_order, "DeformOptions::locality_order for the volume runs");
   bool deform_only = false;
   app.add_flag("--deform-only", deform_only,
                "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
@@ -179,6 +181,7 @@ int main(int argc, char** argv) {
       std::string p1 = "-", p2 = "-", p3 = "-", p4 = "-", p5 = "-";
       deform::DeformOptions dopt;
       dopt.sqp_tolerance = sqp_tolerance;
+      dopt.locality_order = locality_order;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {
         auto& c = paper[m.paper_row];
         p1 = c[1];
