@@ -91,14 +91,13 @@ PairWorker& PairWorker::instance() {
   return w;
 }
 
-PairWorker::PairWorker() : s_(new State) { s_->thread = std::thread([this] { loop(); }); }
+PairWorker::PairWorker() : s_(std::make_unique<State>()) { s_->thread = std::thread([this] { loop(); }); }
 
 PairWorker::~PairWorker() {
   s_->stop.store(true);
   s_->posted.fetch_add(1, std::memory_order_release);
   s_->posted.notify_one();
   s_->thread.join();
-  delete s_;
 }
 
 void PairWorker::loop() {

@@ -2,6 +2,7 @@
 // with the BLAS (OpenBLAS, if that is the one loaded) kept to one thread meanwhile.
 #pragma once
 #include <exception>
+#include <memory>
 #include <thread>
 
 namespace polycube {
@@ -45,7 +46,7 @@ class PairWorker {
   ~PairWorker();
   void loop();
   struct State;
-  State* s_;
+  std::unique_ptr<State> s_;
 };
 }  // namespace detail
 

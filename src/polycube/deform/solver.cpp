@@ -520,10 +520,6 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   return res;
 }
 
-}  // namespace
-
-namespace {
-
 // 21 bits of x spread to every third bit.
 inline uint64_t spread_bits(uint64_t x) {
   x &= 0x1fffff;
@@ -571,15 +567,16 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   const std::vector<int> perm = locality_permutation(V, B);
   MatX3d V2(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
-  std::vector<std::array<int, 4>> tets(T.rows());
-  for (int t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) tets[t][k] = perm[T(t, k)];
-  std::stable_sort(tets.begin(), tets.end(), [](const std::array<int, 4>& a, const std::array<int, 4>& b) {
-    return *std::min_element(a.begin(), a.end()) < *std::min_element(b.begin(), b.end());
-  });
+  // Tets in order of their smallest new vertex id (stable: ties keep the input order).
+  std::vector<int> smallest(T.rows()), order(T.rows());
+  for (int t = 0; t < T.rows(); ++t) {
+    smallest[t] = std::min({perm[T(t, 0)], perm[T(t, 1)], perm[T(t, 2)], perm[T(t, 3)]});
+    order[t] = t;
+  }
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return smallest[a] < smallest[b]; });
   MatX4i T2(T.rows(), 4);
   for (int t = 0; t < T.rows(); ++t)
-    for (int k = 0; k < 4; ++k) T2(t, k) = tets[t][k];
+    for (int k = 0; k < 4; ++k) T2(t, k) = perm[T(order[t], k)];
   DeformResult r = deform(V2, T2, B, opt, hooks);  // boundary ids are unchanged
   MatX3d X(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
