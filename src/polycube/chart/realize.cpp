@@ -1362,6 +1362,20 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   // Set once the continuation start has succeeded (auto: the eq17 start, over its budget, stops).
   std::atomic<bool> continuation_succeeded{false};
   const bool budgeted = starts.size() == 2 && opt.eq17_budget >= 0;
+  // The local untangling first (RealizeOptions::local_first): true, with X and `inverted` its
+  // result, when it leaves at most local_first tets inverted (the global untangling is then
+  // skipped: the tets it leaves are flat, det ~ 0, where the elliptic energy's eps schedule has
+  // nothing to work with); otherwise X stays as it was.
+  auto local_first = [&](const Realizer& solver, MatX3d& X, int& inverted, int& steps) {
+    if (opt.local_first < 0) return false;
+    MatX3d Y = X;
+    int left = inverted;
+    steps += solver.untangle_local(Y, left);
+    if (left > opt.local_first) return false;
+    X = std::move(Y);
+    inverted = left;
+    return true;
+  };
   auto attempt = [&](const std::string& name, Realizer& solver, const Hooks& log) {
     Attempt a;
     MatX3d X = def;
@@ -1394,7 +1408,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
           return a;
         }
         ut = solver.untangle(X, inverted);
-        if (inverted > 0) {
+        const bool local_done = inverted > 0 && local_first(solver, X, inverted, ut);
+        if (inverted > 0 && !local_done) {
           elliptic = solver.untangle_elliptic(X, inverted);
           ut += elliptic;
           if (budgeted && elliptic > opt.eq17_budget) a.over_budget = true;
@@ -1403,8 +1418,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         // them fixed. (Not for the previous start: its few inverted tets are flat, det ~ 0, where
         // the elliptic energy's eps schedule has nothing to work with.)
         if (inverted > 0) a.over_budget = true;
-        if (inverted > 0 && !abandoned()) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
-        if (inverted > 0 && !abandoned()) ut += solver.untangle_local(X, inverted);
+        if (inverted > 0 && !local_done && !abandoned()) ut += solver.untangle_elliptic(X, inverted, Mode::Pinned);
+        if (inverted > 0 && !local_done && !abandoned()) ut += solver.untangle_local(X, inverted);
         if (abandoned()) {
           log.debug("realization from the eq17 start: abandoned after " + std::to_string(ut) +
                     " untangling steps (" + std::to_string(inverted) +
@@ -1474,10 +1489,12 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
         solver.land(X);
         int inverted = 0;
         int u2 = solver.untangle(X, inverted);
-        if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted);
-        // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them fixed.
-        if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted, Mode::Pinned);
-        if (inverted > 0) u2 += solver.untangle_local(X, inverted);
+        if (inverted > 0 && !local_first(solver, X, inverted, u2)) {
+          u2 += solver.untangle_elliptic(X, inverted);
+          // Heights free, the mesh may shrink instead of untangling (humanoid, rocker): again with them fixed.
+          if (inverted > 0) u2 += solver.untangle_elliptic(X, inverted, Mode::Pinned);
+          if (inverted > 0) u2 += solver.untangle_local(X, inverted);
+        }
         log.debug("realization by continuation stalled (" + solver.blocked() + "); after landing on the planes, " +
                   std::to_string(u2) + " untangling steps leave " + std::to_string(inverted) + " tets inverted");
         ut += u2;
