@@ -1,5 +1,6 @@
 // Hex stage: scaled Jacobian, Hausdorff distance, point location, snapping and extraction on
 // shapes with known answers.
+#include <random>
 #include <set>
 
 #include "polycube/chart/labeling.h"
@@ -56,6 +57,30 @@ TEST(Hex, ScaledJacobianKnownValues) {
   EXPECT_LT(s[6], 0);
   EXPECT_GT(s[0], 0);
   EXPECT_EQ(hex::scaled_jacobian(p), *std::min_element(s.begin(), s.end()));
+}
+
+TEST(Hex, ScaledJacobianSamplesAloneAndTheirDependents) {
+  // Each sample alone has the bits of the full set, and moving corner j changes exactly the
+  // samples scaled_jacobian_dependents(j) names: corner j, its three edge neighbours, the centre.
+  std::array<Vec3, 8> p = unit_hex();
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.15, 0.15);
+  for (auto& x : p) x += Vec3(u(rng), u(rng), u(rng));
+  const auto all = hex::scaled_jacobian_samples(p);
+  for (int k = 0; k < 9; ++k) EXPECT_EQ(hex::scaled_jacobian_sample(p, k), all[k]);
+  for (int j = 0; j < 8; ++j) {
+    const unsigned dep = hex::scaled_jacobian_dependents(j);
+    EXPECT_EQ(__builtin_popcount(dep), 5) << "corner " << j;
+    auto q = p;
+    q[j] += Vec3(0.05, -0.03, 0.04);
+    const auto moved = hex::scaled_jacobian_samples(q);
+    for (int k = 0; k < 9; ++k) {
+      if (dep >> k & 1u)
+        EXPECT_NE(moved[k], all[k]) << "corner " << j << ", sample " << k;
+      else
+        EXPECT_EQ(moved[k], all[k]) << "corner " << j << ", sample " << k;
+    }
+  }
 }
 
 TEST(Hex, QualityStatisticsAndHistogram) {

@@ -101,9 +101,10 @@ int count_inverted(const MatX3d& X, const MatX4i& T, const deform::ArapRest& res
 // flat > 0: the tets to repair are those whose volume ratio is below flat x the mean one (nearly
 // flat or inverted), `inverted` counts them, and a sweep is kept only while it raises the smallest
 // volume ratio and turns no tet over (opening nearly flat tets of a valid map).
+// stop: asked before each sweep with 100 x the sweeps so far; true ends it.
 template <class Fixed>
 int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed fixed, MatX3d& X, int& inverted,
-                     int rings, int max_sweeps, double flat = 0) {
+                     int rings, int max_sweeps, double flat = 0, const std::function<bool(int)>& stop = {}) {
   const int n = static_cast<int>(X.rows());
   const int nt = static_cast<int>(T_.rows());
   std::vector<std::vector<int>> vt(n);
@@ -135,7 +136,7 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
   int sweep = 0, best = inverted, since_best = 0;
   MatX3d kept;  // flat > 0: the state before the sweep, whose scan is `before`
   Scan before;
-  for (; sweep < max_sweeps && inverted > 0 && since_best < 30; ++sweep) {
+  for (; sweep < max_sweeps && inverted > 0 && since_best < 30 && !(stop && stop(100 * sweep)); ++sweep) {
     if (flat > 0) kept = X, before = now;
     // The region: vertices within `rings` of a tet to repair, found again every sweep (a sweep
     // is 10 passes over it).
@@ -557,9 +558,11 @@ class Realizer {
   }
 
   // Local untangling (untangle_locally below) with the planes' coordinates fixed.
+  // The stop callback (set_stop) is asked before each sweep, with 100 x the sweeps so far.
   int untangle_local(MatX3d& X, int& inverted, int rings = 3, int max_sweeps = 300) const {
     const int sweeps = untangle_locally(
-        T_, arap_rest_, [&](int v, int k) { return planes_.of_vertex[k][v] >= 0; }, X, inverted, rings, max_sweeps);
+        T_, arap_rest_, [&](int v, int k) { return planes_.of_vertex[k][v] >= 0; }, X, inverted, rings, max_sweeps,
+        0.0, stop_);
     int shown = 0;
     hooks_.debug("local untangling: " + std::to_string(sweeps) + " sweeps, " + std::to_string(inverted) +
                  " tets inverted" + (inverted > 0 && inverted < 4 ? ": " + inverted_tets(X, &shown) : std::string()));
@@ -581,7 +584,10 @@ class Realizer {
                    " left under " + std::to_string(kOpenFlat) + " of the mean volume ratio");
   }
 
-  /// The elliptic untangling stops before a round when stop(iterations so far in the call) is true.
+  /// The elliptic untangling stops before a round when stop(iterations so far in the call) is
+  /// true, the local untangling before a sweep when stop(100 x its sweeps so far) is (against
+  /// RealizeOptions::eq17_budget a sweep counts as 100 iterations: past 3 sweeps, a budgeted eq17
+  /// start is abandoned once the continuation has succeeded; its wins needed 1).
   void set_stop(std::function<bool(int)> stop) { stop_ = std::move(stop); }
 
   // The barrier's Gauss-Newton curvature on tet t at X: b'' of (w log(J / tau))^2, the tet's
@@ -924,7 +930,7 @@ class Realizer {
   const Planes& planes_;
   const RealizeOptions& opt_;
   const Hooks& hooks_;
-  std::function<bool(int)> stop_;  // asked before each elliptic round with that call's iterations so far
+  std::function<bool(int)> stop_;  // see set_stop
   deform::ArapRest arap_rest_;
   Reduced red_;
   SpMat K_;

@@ -53,19 +53,89 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   for (int v = 0; v < n; ++v)
     movable[v] = !(v < static_cast<int>(fixed.size()) && fixed[v]) && !(boundary[v] && !surface) && !vh[v].empty();
 
+  // Per hex at the current positions: its scaled Jacobian samples, their soft-min terms
+  // exp(-k sj) and its worst sample. The objective at a vertex's current position is read from
+  // them, and at a trial position only the samples that depend on the vertex (5 of 9) are
+  // computed again; the terms are summed in the same order either way, so the result has the
+  // same bits as computing every sample. Updated for the hexes of every vertex moved.
+  std::vector<std::array<double, 9>> samples(H.rows()), terms(H.rows());
+  std::vector<double> hex_worst(H.rows());
+  std::vector<std::vector<std::pair<int, int>>> vhj(n);  // per vertex: (hex, its corner index)
+  for (int h = 0; h < H.rows(); ++h)
+    for (int i = 0; i < 8; ++i) vhj[H(h, i)].push_back({h, i});
+  unsigned dependents[8];
+  for (int j = 0; j < 8; ++j) dependents[j] = scaled_jacobian_dependents(j);
+  auto corners = [&](int h, std::array<Vec3, 8>& c) {
+    for (int i = 0; i < 8; ++i) c[i] = V.row(H(h, i)).transpose();
+  };
+  auto refresh = [&](int h) {
+    std::array<Vec3, 8> c;
+    corners(h, c);
+    samples[h] = scaled_jacobian_samples(c);
+    double w = 1e300;
+    for (int i = 0; i < 9; ++i) {
+      w = std::min(w, samples[h][i]);
+      terms[h][i] = std::exp(-kSoftMin * samples[h][i]);
+    }
+    hex_worst[h] = w;
+  };
+  for (int h = 0; h < H.rows(); ++h) refresh(h);
+  // The last trial (eval's v and p) and the samples and terms it computed, per hex of v: a move
+  // to that trial position takes them instead of computing them again.
+  int trial_v = -1;
+  Vec3 trial_p = Vec3::Zero();
+  std::vector<std::array<double, 9>> trial_samples, trial_terms;
   // Soft-min objective and worst scaled Jacobian of v's hexes with v at p.
   auto eval = [&](int v, const Vec3& p, double& worst) {
     double sum = 0;
     worst = 1e300;
-    for (int h : vh[v]) {
+    trial_v = v;
+    trial_p = p;
+    trial_samples.resize(vhj[v].size());
+    trial_terms.resize(vhj[v].size());
+    for (size_t e = 0; e < vhj[v].size(); ++e) {
+      const auto [h, j] = vhj[v][e];
       std::array<Vec3, 8> c;
-      for (int i = 0; i < 8; ++i) c[i] = H(h, i) == v ? p : Vec3(V.row(H(h, i)).transpose());
-      for (double s : scaled_jacobian_samples(c)) {
-        worst = std::min(worst, s);
-        sum += std::exp(-kSoftMin * s);
+      corners(h, c);
+      c[j] = p;
+      const unsigned dep = dependents[j];
+      for (int k = 0; k < 9; ++k) {
+        if (dep >> k & 1u) {
+          trial_samples[e][k] = scaled_jacobian_sample(c, k);
+          trial_terms[e][k] = std::exp(-kSoftMin * trial_samples[e][k]);
+        } else {
+          trial_samples[e][k] = samples[h][k];
+          trial_terms[e][k] = terms[h][k];
+        }
+        worst = std::min(worst, trial_samples[e][k]);
+        sum += trial_terms[e][k];
       }
     }
     return sum;
+  };
+  auto eval_here = [&](int v, double& worst) {
+    double sum = 0;
+    worst = 1e300;
+    for (int h : vh[v]) {
+      worst = std::min(worst, hex_worst[h]);
+      for (double t : terms[h]) sum += t;
+    }
+    return sum;
+  };
+  auto move = [&](int v, const Vec3& p) {
+    V.row(v) = p.transpose();
+    if (trial_v != v || trial_p != p) {
+      for (int h : vh[v]) refresh(h);
+      return;
+    }
+    for (size_t e = 0; e < vhj[v].size(); ++e) {
+      const int h = vhj[v][e].first;
+      samples[h] = trial_samples[e];
+      terms[h] = trial_terms[e];
+      double w = 1e300;
+      for (double x : samples[h]) w = std::min(w, x);
+      hex_worst[h] = w;
+    }
   };
   // Patch of every boundary vertex: that of its closest surface triangle at the start.
   std::vector<int> patch(n, -1);
@@ -128,12 +198,12 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       c /= static_cast<double>(ring.size());
       const Vec3 x = V.row(v).transpose();
       double before, after;
-      eval(v, x, before);
+      eval_here(v, before);
       for (double t : {1.0, 0.5, 0.25}) {
         const Vec3 p = place(v, x + t * (c - x));
         eval(v, p, after);
         if (after > before + 1e-9 || (after >= before && after > 0.3)) {
-          V.row(v) = p.transpose();
+          move(v, p);
           ++moves;
           ++st.laplacian_moves;
           break;
@@ -145,7 +215,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       if (!movable[v]) continue;
       const Vec3 x = V.row(v).transpose();
       double m0;
-      const double f0 = eval(v, x, m0);
+      const double f0 = eval_here(v, m0);
       if (m0 >= optimize_below) continue;
       double len = 0;
       for (int u : nb[v]) len += (V.row(u).transpose() - x).norm();
@@ -175,7 +245,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
         double m;
         const double f = eval(v, p, m);
         if (m > m0 + 1e-9 || (f < f0 && m >= m0)) {
-          V.row(v) = p.transpose();
+          move(v, p);
           ++moves;
           ++st.optimized_moves;
           break;

@@ -20,20 +20,35 @@ double normalized_det(const Vec3& a, const Vec3& b, const Vec3& c) {
 
 }  // namespace
 
-std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p) {
-  std::array<double, 9> s;
-  // Corners: the three edges leaving each corner, in Verdict's order (right-handed for a positive hex).
-  static constexpr int kCorner[8][4] = {{0, 1, 3, 4}, {1, 2, 0, 5}, {2, 3, 1, 6}, {3, 0, 2, 7},
-                                        {4, 7, 5, 0}, {5, 4, 6, 1}, {6, 5, 7, 2}, {7, 6, 4, 3}};
-  for (int i = 0; i < 8; ++i) {
-    const auto& c = kCorner[i];
-    s[i] = normalized_det(p[c[1]] - p[c[0]], p[c[2]] - p[c[0]], p[c[3]] - p[c[0]]);
+namespace {
+// Corners: the three edges leaving each corner, in Verdict's order (right-handed for a positive hex).
+constexpr int kCorner[8][4] = {{0, 1, 3, 4}, {1, 2, 0, 5}, {2, 3, 1, 6}, {3, 0, 2, 7},
+                               {4, 7, 5, 0}, {5, 4, 6, 1}, {6, 5, 7, 2}, {7, 6, 4, 3}};
+}  // namespace
+
+double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k) {
+  if (k < 8) {
+    const auto& c = kCorner[k];
+    return normalized_det(p[c[1]] - p[c[0]], p[c[2]] - p[c[0]], p[c[3]] - p[c[0]]);
   }
   // Centre: the three principal axes (Verdict's calc_hex_efg 1, 2, 3).
   const Vec3 xi = (p[1] - p[0]) + (p[2] - p[3]) + (p[5] - p[4]) + (p[6] - p[7]);
   const Vec3 et = (p[3] - p[0]) + (p[2] - p[1]) + (p[7] - p[4]) + (p[6] - p[5]);
   const Vec3 ze = (p[4] - p[0]) + (p[5] - p[1]) + (p[6] - p[2]) + (p[7] - p[3]);
-  s[8] = normalized_det(xi, et, ze);
+  return normalized_det(xi, et, ze);
+}
+
+unsigned scaled_jacobian_dependents(int j) {
+  unsigned m = 1u << 8;  // the centre
+  for (int k = 0; k < 8; ++k)
+    for (int i = 0; i < 4; ++i)
+      if (kCorner[k][i] == j) m |= 1u << k;
+  return m;
+}
+
+std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p) {
+  std::array<double, 9> s;
+  for (int k = 0; k < 9; ++k) s[k] = scaled_jacobian_sample(p, k);
   return s;
 }
 

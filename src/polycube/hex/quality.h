@@ -20,6 +20,11 @@ double scaled_jacobian(const std::array<Vec3, 8>& p);
 double scaled_jacobian(const MatX3d& V, const MatX8i& H, int h);
 /// The 9 values it is the minimum of: the 8 corners (in vertex order), then the centre.
 std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p);
+/// Sample k of scaled_jacobian_samples(p) alone (0..7: corner k, 8: the centre), the same value.
+double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k);
+/// The samples that depend on corner j's position: bit k set for sample k (j itself, the three
+/// corners joined to it by an edge, and the centre).
+unsigned scaled_jacobian_dependents(int j);
 
 /// Statistics of per-element scaled Jacobians (hexes or quads).
 struct QualityStats {
