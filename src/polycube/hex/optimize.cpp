@@ -30,9 +30,10 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
                              const Hooks& hooks) {
   OptimizeStats st;
   const int n = static_cast<int>(V.rows());
-  std::vector<std::vector<int>> vh(n), nb(n), bnb(n), vq(n);
+  std::vector<std::vector<int>> nb(n), bnb(n), vq(n);
+  std::vector<std::vector<std::pair<int, int>>> vhj(n);  // per vertex: (hex, its corner index)
   for (int h = 0; h < H.rows(); ++h) {
-    for (int i = 0; i < 8; ++i) vh[H(h, i)].push_back(h);
+    for (int i = 0; i < 8; ++i) vhj[H(h, i)].push_back({h, i});
     for (const auto& e : kEdges) {
       nb[H(h, e[0])].push_back(H(h, e[1]));
       nb[H(h, e[1])].push_back(H(h, e[0]));
@@ -51,7 +52,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   sort_unique(bnb);
   std::vector<char> movable(n, 0);
   for (int v = 0; v < n; ++v)
-    movable[v] = !(v < static_cast<int>(fixed.size()) && fixed[v]) && !(boundary[v] && !surface) && !vh[v].empty();
+    movable[v] = !(v < static_cast<int>(fixed.size()) && fixed[v]) && !(boundary[v] && !surface) && !vhj[v].empty();
 
   // Per hex at the current positions: its scaled Jacobian samples, their soft-min terms
   // exp(-k sj) and its worst sample. The objective at a vertex's current position is read from
@@ -60,24 +61,22 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   // same bits as computing every sample. Updated for the hexes of every vertex moved.
   std::vector<std::array<double, 9>> samples(H.rows()), terms(H.rows());
   std::vector<double> hex_worst(H.rows());
-  std::vector<std::vector<std::pair<int, int>>> vhj(n);  // per vertex: (hex, its corner index)
-  for (int h = 0; h < H.rows(); ++h)
-    for (int i = 0; i < 8; ++i) vhj[H(h, i)].push_back({h, i});
   unsigned dependents[8];
   for (int j = 0; j < 8; ++j) dependents[j] = scaled_jacobian_dependents(j);
   auto corners = [&](int h, std::array<Vec3, 8>& c) {
     for (int i = 0; i < 8; ++i) c[i] = V.row(H(h, i)).transpose();
   };
+  auto set_worst = [&](int h) {
+    double w = 1e300;
+    for (double x : samples[h]) w = std::min(w, x);
+    hex_worst[h] = w;
+  };
   auto refresh = [&](int h) {
     std::array<Vec3, 8> c;
     corners(h, c);
     samples[h] = scaled_jacobian_samples(c);
-    double w = 1e300;
-    for (int i = 0; i < 9; ++i) {
-      w = std::min(w, samples[h][i]);
-      terms[h][i] = std::exp(-kSoftMin * samples[h][i]);
-    }
-    hex_worst[h] = w;
+    for (int i = 0; i < 9; ++i) terms[h][i] = std::exp(-kSoftMin * samples[h][i]);
+    set_worst(h);
   };
   for (int h = 0; h < H.rows(); ++h) refresh(h);
   // The last trial (eval's v and p) and the samples and terms it computed, per hex of v: a move
@@ -116,7 +115,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   auto eval_here = [&](int v, double& worst) {
     double sum = 0;
     worst = 1e300;
-    for (int h : vh[v]) {
+    for (const auto& [h, j] : vhj[v]) {
       worst = std::min(worst, hex_worst[h]);
       for (double t : terms[h]) sum += t;
     }
@@ -125,16 +124,14 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   auto move = [&](int v, const Vec3& p) {
     V.row(v) = p.transpose();
     if (trial_v != v || trial_p != p) {
-      for (int h : vh[v]) refresh(h);
+      for (const auto& [h, j] : vhj[v]) refresh(h);
       return;
     }
     for (size_t e = 0; e < vhj[v].size(); ++e) {
       const int h = vhj[v][e].first;
       samples[h] = trial_samples[e];
       terms[h] = trial_terms[e];
-      double w = 1e300;
-      for (double x : samples[h]) w = std::min(w, x);
-      hex_worst[h] = w;
+      set_worst(h);
     }
   };
   // Patch of every boundary vertex: that of its closest surface triangle at the start.
