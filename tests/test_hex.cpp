@@ -83,6 +83,40 @@ TEST(Hex, ScaledJacobianSamplesAloneAndTheirDependents) {
   }
 }
 
+TEST(Hex, ScaledJacobianSampleGradientMatchesFiniteDifferences) {
+  // Against central differences of each sample with respect to each corner, on a distorted hex
+  // and on a nearly flat one; the value has the bits of scaled_jacobian_sample.
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-0.2, 0.2);
+  for (int shape = 0; shape < 2; ++shape) {
+    std::array<Vec3, 8> p = unit_hex();
+    for (auto& x : p) x += Vec3(u(rng), u(rng), u(rng));
+    if (shape == 1)
+      for (int i = 4; i < 8; ++i) p[i].z() = p[i - 4].z() + 0.02 + 0.01 * i;  // thin in z
+    for (int j = 0; j < 8; ++j) {
+      const unsigned dep = hex::scaled_jacobian_dependents(j);
+      for (int k = 0; k < 9; ++k) {
+        Vec3 g;
+        const double f = hex::scaled_jacobian_sample_gradient(p, k, j, g);
+        EXPECT_EQ(f, hex::scaled_jacobian_sample(p, k));
+        if (!(dep >> k & 1u)) {
+          EXPECT_EQ(g.norm(), 0.0) << "corner " << j << ", sample " << k;
+          continue;
+        }
+        const double h = 1e-6;
+        for (int d = 0; d < 3; ++d) {
+          auto a = p, b = p;
+          a[j][d] += h;
+          b[j][d] -= h;
+          const double fd = (hex::scaled_jacobian_sample(a, k) - hex::scaled_jacobian_sample(b, k)) / (2 * h);
+          EXPECT_NEAR(g[d], fd, 1e-6 * std::max(1.0, std::abs(fd))) << "shape " << shape << ", corner " << j
+                                                                      << ", sample " << k << ", axis " << d;
+        }
+      }
+    }
+  }
+}
+
 TEST(Hex, QualityStatisticsAndHistogram) {
   MatX3d V(12, 3);
   MatX8i H(2, 8);

@@ -47,6 +47,20 @@ TriangleTree::TriangleTree(const MatX3d& V, const MatX3i& F) : V_(V), F_(F), ord
   for (int i = 0; i < F.rows(); ++i) order_[i] = i;
   nodes_.reserve(2 * F.rows() / 4 + 2);
   if (F.rows() > 0) build(0, static_cast<int>(F.rows()));
+  tris_.resize(order_.size());
+  for (size_t i = 0; i < order_.size(); ++i) {
+    Tri& t = tris_[i];
+    const int f = order_[i];
+    t.a = V_.row(F_(f, 0));
+    t.b = V_.row(F_(f, 1));
+    t.c = V_.row(F_(f, 2));
+    t.cross = (t.b - t.a).cross(t.c - t.a);
+    const double l = t.cross.norm();
+    // Slivers (sine of the smallest angle under 1e-4) get no plane bound: their normal's rounding.
+    const double e = std::max({(t.b - t.a).squaredNorm(), (t.c - t.a).squaredNorm(), (t.c - t.b).squaredNorm()});
+    t.unit = l > 1e-4 * e ? Vec3(t.cross / l) : Vec3::Zero();
+    t.offset = t.unit.dot(t.a);
+  }
 }
 
 int TriangleTree::build(int begin, int end) {
@@ -78,19 +92,27 @@ ClosestHit TriangleTree::closest(const Vec3& p, const Vec3* facing, const std::v
   ClosestHit best;
   best.dist2 = std::numeric_limits<double>::infinity();
   if (nodes_.empty()) return best;
-  std::vector<int> stack{0};
-  while (!stack.empty()) {
-    const Node& n = nodes_[stack.back()];
-    stack.pop_back();
+  // Depth-first; the tree splits at the median, so it is at most ~log2(faces) deep and the stack
+  // holds at most one node per level plus one (no allocation per query).
+  int stack[128];
+  int top = 0;
+  stack[top++] = 0;
+  while (top > 0) {
+    const Node& n = nodes_[stack[--top]];
     if (n.box.squaredExteriorDistance(p) >= best.dist2) continue;
     if (n.left < 0) {
       for (int i = n.begin; i < n.end; ++i) {
         const int f = order_[i];
-        const Vec3 a = V_.row(F_(f, 0)), b = V_.row(F_(f, 1)), c = V_.row(F_(f, 2));
-        if (facing && !((b - a).cross(c - a).dot(*facing) > 0)) continue;
+        const Tri& t = tris_[i];
+        if (facing && !(t.cross.dot(*facing) > 0)) continue;
         if (group && (*group)[f] != group_id) continue;
-        const Vec3 w = closest_point_barycentric(p, a, b, c);
-        const Vec3 q = w[0] * a + w[1] * b + w[2] * c;
+        // The distance to the triangle's plane bounds the distance to it from below. Margins over
+        // the rounding (the cancellation in h is relative to the coordinates' size) so that only
+        // triangles whose computed distance could not be the smaller are skipped.
+        const double up = t.unit.dot(p), h = std::abs(up - t.offset) - 1e-12 * (std::abs(up) + std::abs(t.offset));
+        if (h > 0 && h * h > best.dist2 * (1 + 1e-6)) continue;
+        const Vec3 w = closest_point_barycentric(p, t.a, t.b, t.c);
+        const Vec3 q = w[0] * t.a + w[1] * t.b + w[2] * t.c;
         const double d2 = (q - p).squaredNorm();
         if (d2 < best.dist2) best = {f, w, q, d2};
       }
@@ -99,11 +121,11 @@ ClosestHit TriangleTree::closest(const Vec3& p, const Vec3* facing, const std::v
     // Nearer child last, so that it is popped first.
     const double dl = nodes_[n.left].box.squaredExteriorDistance(p), dr = nodes_[n.right].box.squaredExteriorDistance(p);
     if (dl < dr) {
-      stack.push_back(n.right);
-      stack.push_back(n.left);
+      stack[top++] = n.right;
+      stack[top++] = n.left;
     } else {
-      stack.push_back(n.left);
-      stack.push_back(n.right);
+      stack[top++] = n.left;
+      stack[top++] = n.right;
     }
   }
   if (group && best.face < 0) return closest(p, facing);  // no triangle of that group

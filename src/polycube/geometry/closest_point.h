@@ -38,11 +38,19 @@ class TriangleTree {
     int left = -1, right = -1;  // children, or -1 for a leaf
     int begin = 0, end = 0;     // leaf: range in order_
   };
+  // A triangle as the queries read it, stored in leaf order: corners, (b - a) x (c - a) (the
+  // facing test) and the unit normal with the plane's offset (a lower bound of the distance that
+  // skips the exact closest point; zero normal for a degenerate triangle: never skipped).
+  struct Tri {
+    Vec3 a, b, c, cross, unit;
+    double offset = 0;
+  };
   int build(int begin, int end);
   MatX3d V_;
   MatX3i F_;
   std::vector<int> order_;
   std::vector<Node> nodes_;
+  std::vector<Tri> tris_;
 };
 
 }  // namespace polycube::geometry

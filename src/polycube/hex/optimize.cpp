@@ -83,10 +83,22 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   // to that trial position takes them instead of computing them again.
   int trial_v = -1;
   Vec3 trial_p = Vec3::Zero();
+  bool trial_terms_set = false;
   std::vector<std::array<double, 9>> trial_samples, trial_terms;
-  // Soft-min objective and worst scaled Jacobian of v's hexes with v at p.
-  auto eval = [&](int v, const Vec3& p, double& worst) {
-    double sum = 0;
+  // The trial's soft-min terms, from its samples (the same arithmetic as in eval).
+  auto set_trial_terms = [&] {
+    for (size_t e = 0; e < vhj[trial_v].size(); ++e) {
+      const auto [h, j] = vhj[trial_v][e];
+      const unsigned dep = dependents[j];
+      for (int k = 0; k < 9; ++k)
+        trial_terms[e][k] = dep >> k & 1u ? std::exp(-kSoftMin * trial_samples[e][k]) : terms[h][k];
+    }
+    trial_terms_set = true;
+  };
+  // Soft-min objective and worst scaled Jacobian of v's hexes with v at p. With !with_sum only the
+  // worst is computed (the smart Laplacian reads nothing else): the exponentials are left to a move,
+  // and the evaluation stops as soon as the worst is below `floor` (the trial is then forgotten).
+  auto eval = [&](int v, const Vec3& p, double& worst, bool with_sum = true, double floor = -1e300) {
     worst = 1e300;
     trial_v = v;
     trial_p = p;
@@ -99,17 +111,20 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       c[j] = p;
       const unsigned dep = dependents[j];
       for (int k = 0; k < 9; ++k) {
-        if (dep >> k & 1u) {
-          trial_samples[e][k] = scaled_jacobian_sample(c, k);
-          trial_terms[e][k] = std::exp(-kSoftMin * trial_samples[e][k]);
-        } else {
-          trial_samples[e][k] = samples[h][k];
-          trial_terms[e][k] = terms[h][k];
-        }
+        trial_samples[e][k] = dep >> k & 1u ? scaled_jacobian_sample(c, k) : samples[h][k];
         worst = std::min(worst, trial_samples[e][k]);
-        sum += trial_terms[e][k];
+      }
+      if (!with_sum && worst < floor) {
+        trial_v = -1;
+        return 0.0;
       }
     }
+    trial_terms_set = false;
+    if (!with_sum) return 0.0;
+    set_trial_terms();
+    double sum = 0;
+    for (size_t e = 0; e < vhj[v].size(); ++e)
+      for (int k = 0; k < 9; ++k) sum += trial_terms[e][k];
     return sum;
   };
   auto eval_here = [&](int v, double& worst) {
@@ -127,6 +142,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       for (const auto& [h, j] : vhj[v]) refresh(h);
       return;
     }
+    if (!trial_terms_set) set_trial_terms();
     for (size_t e = 0; e < vhj[v].size(); ++e) {
       const int h = vhj[v][e].first;
       samples[h] = trial_samples[e];
@@ -198,7 +214,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       eval_here(v, before);
       for (double t : {1.0, 0.5, 0.25}) {
         const Vec3 p = place(v, x + t * (c - x));
-        eval(v, p, after);
+        eval(v, p, after, false, before);  // below `before`: refused, whatever the rest
         if (after > before + 1e-9 || (after >= before && after > 0.3)) {
           move(v, p);
           ++moves;
@@ -218,14 +234,18 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       for (int u : nb[v]) len += (V.row(u).transpose() - x).norm();
       len /= std::max<size_t>(1, nb[v].size());
       if (!(len > 0)) continue;
-      const double h = 1e-4 * len;
-      Vec3 g;
-      for (int k = 0; k < 3; ++k) {
-        Vec3 a = x, b = x;
-        a[k] += h;
-        b[k] -= h;
-        double w;
-        g[k] = (eval(v, a, w) - eval(v, b, w)) / (2 * h);
+      // Gradient of the soft minimum: sum over the dependent samples of -k exp(-k sj) grad sj.
+      Vec3 g = Vec3::Zero();
+      for (const auto& [hx, j] : vhj[v]) {
+        std::array<Vec3, 8> c;
+        corners(hx, c);
+        const unsigned dep = dependents[j];
+        for (int k = 0; k < 9; ++k) {
+          if (!(dep >> k & 1u)) continue;
+          Vec3 gk;
+          scaled_jacobian_sample_gradient(c, k, j, gk);
+          g -= kSoftMin * terms[hx][k] * gk;
+        }
       }
       if (boundary[v]) {
         Vec3 nrm = vertex_normal(v);

@@ -4,7 +4,7 @@
 //      the mean of its edge neighbours (boundary vertices: of their boundary neighbours, then back
 //      onto the surface) when the worst scaled Jacobian of its hexes does not get worse;
 //   2. local optimization of vertices whose hexes are below `optimize_below` (or inverted): descent on the soft minimum sum exp(-k sj) over the 9 samples of each incident
-//      hex (finite-difference gradient, tangent to the surface on the boundary, backtracking
+//      hex (analytic gradient, tangent to the surface on the boundary, backtracking
 //      line search accepting only moves that raise the worst scaled Jacobian). This untangles.
 #pragma once
 #include <array>

@@ -38,6 +38,40 @@ double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k) {
   return normalized_det(xi, et, ze);
 }
 
+double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int j, Vec3& grad) {
+  Vec3 a, b, c;
+  double ca, cb, cc;  // d(a, b, c) / d p[j], each a multiple of the identity
+  if (k < 8) {
+    const auto& q = kCorner[k];
+    a = p[q[1]] - p[q[0]];
+    b = p[q[2]] - p[q[0]];
+    c = p[q[3]] - p[q[0]];
+    const double o = j == q[0] ? 1.0 : 0.0;
+    ca = (j == q[1] ? 1.0 : 0.0) - o;
+    cb = (j == q[2] ? 1.0 : 0.0) - o;
+    cc = (j == q[3] ? 1.0 : 0.0) - o;
+  } else {
+    a = (p[1] - p[0]) + (p[2] - p[3]) + (p[5] - p[4]) + (p[6] - p[7]);
+    b = (p[3] - p[0]) + (p[2] - p[1]) + (p[7] - p[4]) + (p[6] - p[5]);
+    c = (p[4] - p[0]) + (p[5] - p[1]) + (p[6] - p[2]) + (p[7] - p[3]);
+    constexpr double kXi[8] = {-1, 1, 1, -1, -1, 1, 1, -1}, kEt[8] = {-1, -1, 1, 1, -1, -1, 1, 1},
+                     kZe[8] = {-1, -1, -1, -1, 1, 1, 1, 1};
+    ca = kXi[j];
+    cb = kEt[j];
+    cc = kZe[j];
+  }
+  const double f = normalized_det(a, b, c);
+  grad.setZero();
+  const double a2 = a.squaredNorm(), b2 = b.squaredNorm(), c2 = c.squaredNorm();
+  const double l = std::sqrt(a2 * b2 * c2);
+  if (!(l > 0)) return f;
+  // f = a.(b x c) / (|a| |b| |c|): df/da = (b x c) / l - f a / |a|^2, and cyclically.
+  if (ca != 0) grad += ca * (b.cross(c) / l - f * a / a2);
+  if (cb != 0) grad += cb * (c.cross(a) / l - f * b / b2);
+  if (cc != 0) grad += cc * (a.cross(b) / l - f * c / c2);
+  return f;
+}
+
 unsigned scaled_jacobian_dependents(int j) {
   unsigned m = 1u << 8;  // the centre
   for (int k = 0; k < 8; ++k)

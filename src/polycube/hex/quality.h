@@ -22,6 +22,9 @@ double scaled_jacobian(const MatX3d& V, const MatX8i& H, int h);
 std::array<double, 9> scaled_jacobian_samples(const std::array<Vec3, 8>& p);
 /// Sample k of scaled_jacobian_samples(p) alone (0..7: corner k, 8: the centre), the same value.
 double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k);
+/// Sample k alone, as scaled_jacobian_sample (the same bits), and in `grad` its gradient with
+/// respect to corner j's position (zero when sample k does not depend on it, or is degenerate).
+double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int j, Vec3& grad);
 /// The samples that depend on corner j's position: bit k set for sample k (j itself, the three
 /// corners joined to it by an edge, and the centre).
 unsigned scaled_jacobian_dependents(int j);
