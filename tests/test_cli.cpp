@@ -150,6 +150,29 @@ TEST(Cli, TetMeshInputSkipsTetrahedralization) {
   EXPECT_EQ(b["tetmesh"]["tets"], a["tetmesh"]["tets"]);
 }
 
+TEST(Cli, TetMeshInputIsTetrahedralizedAgainWhenASizeIsGiven) {
+  // --tets (or --max-size, --edge-length) on a tet input: its boundary gets a new tet mesh of
+  // about that size instead of the options being ignored; the input's figures stay in the report.
+  std::string dir = temp_dir("tetre");
+  ASSERT_EQ(run_cli("--example sphere -q --until tet -o " + dir + "/a").code, 0);
+  const json a = report(dir + "/a");
+  const int before = a["tetmesh"]["tets"].get<int>();
+  RunResult r = run_cli(dir + "/a/tetmesh.mesh --until tet --tets " + std::to_string(4 * before) + " -o " + dir + "/b");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("replaced by a tetrahedralization of its boundary"), std::string::npos) << r.output;
+  const json b = report(dir + "/b");
+  EXPECT_EQ(b["input"]["kind"], "tet");
+  EXPECT_EQ(b["input"]["tets"], before);
+  EXPECT_EQ(b["input"]["tets_replaced"], true);
+  EXPECT_NE(b["tetmesh"]["source"], "input");
+  EXPECT_GT(b["tetmesh"]["tets"].get<int>(), 2 * before);
+  EXPECT_EQ(b["tetmesh"]["inverted"], 0);
+  // Without a size the input's tets are kept.
+  RunResult k = run_cli(dir + "/a/tetmesh.mesh --until tet -o " + dir + "/c");
+  ASSERT_EQ(k.code, 0) << k.output;
+  EXPECT_EQ(report(dir + "/c")["tetmesh"]["source"], "input");
+}
+
 TEST(Cli, HexMeshInputIsTetrahedralized) {
   // A 2x1x1 block of two hexes.
   MeshData m;

@@ -224,8 +224,21 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (tr.tets_reoriented) report["input"]["repaired"] = true;
       surface.V = bm.V;
       surface.F = bm.F;
-      surf_to_tet = back;
-      have_tets = true;
+      // --tets, --max-size or --edge-length ask for another tet mesh: the input's boundary is
+      // tetrahedralized again (a coarse input, e.g. tentacles one tet thick, cannot bend into a
+      // polycube without inverting tets). Otherwise the input's tets are the tet mesh.
+      const bool retet = !given_map && !opt.surface &&
+                         (opt.tet.target_tets > 0 || opt.tet.max_size > 0 || opt.tet.edge_length > 0);
+      if (retet) {
+        report["input"]["tets_replaced"] = true;
+        hooks.info("tet input: its " + std::to_string(tm.T.rows()) +
+                   " tets are replaced by a tetrahedralization of its boundary (--tets, --max-size or --edge-length given)");
+        tm = TetMesh();
+        input_closed = sr.closed;
+      } else {
+        surf_to_tet = back;
+        have_tets = true;
+      }
     } else {
       MeshData s = in.H.rows() > 0 ? hex_boundary_surface(in) : in;
       report["input"]["kind"] = in.H.rows() > 0 ? "hex" : "surface";
