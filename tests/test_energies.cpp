@@ -402,6 +402,39 @@ TEST(Energies, UntangleTetTermsSumToTheEnergy) {
   EXPECT_LT((g - gs).norm(), 1e-12 * g.norm());
 }
 
+TEST(Energies, UntangleCornerGradientAndHessianAreExact) {
+  // Per corner: the energy and gradient equal the tet term's, and the Hessian matches central
+  // differences of that gradient; on valid and inverted tets.
+  Small s = small_mesh();
+  ArapRest rest = ArapRest::build(s.X0, s.T);
+  MatX3d M = s.X;
+  M.row(0) *= -1;  // some tets inverted
+  for (const MatX3d* X : {&s.X, &M})
+    for (double eps : {1e-1, 1e-2})
+      for (int t = 0; t < s.T.rows(); ++t)
+        for (int j = 0; j < 4; ++j) {
+          Eigen::Matrix<double, 12, 1> ge;
+          const double e = untangle_tet_energy(*X, s.T, rest, t, eps, 1.1, 0.5, &ge);
+          Vec3 g;
+          Eigen::Matrix3d H;
+          EXPECT_NEAR(untangle_tet_corner(*X, s.T, rest, t, j, eps, 1.1, 0.5, &g, &H), e, 1e-13 * std::abs(e));
+          EXPECT_LT((g - ge.segment<3>(3 * j)).norm(), 1e-10 * std::max(1.0, g.norm()));
+          const double h = 1e-6;
+          for (int k = 0; k < 3; ++k) {
+            MatX3d P = *X, Q = *X;
+            P(s.T(t, j), k) += h;
+            Q(s.T(t, j), k) -= h;
+            Vec3 gp, gq;
+            untangle_tet_corner(P, s.T, rest, t, j, eps, 1.1, 0.5, &gp, nullptr);
+            untangle_tet_corner(Q, s.T, rest, t, j, eps, 1.1, 0.5, &gq, nullptr);
+            const Vec3 col = (gp - gq) / (2 * h);
+            EXPECT_LT((H.col(k) - col).norm(), 1e-5 * std::max(1.0, col.norm()))
+                << "tet " << t << ", corner " << j << ", axis " << k << ", eps " << eps;
+          }
+          EXPECT_LT((H - H.transpose()).norm(), 1e-12 * std::max(1.0, H.norm()));
+        }
+}
+
 TEST(Lbfgs, BoundedFirstStepStillReachesTheMinimum) {
   // f(z) = 0.5 (z - c)^T A (z - c), A diagonal and badly scaled; start 10 away from c.
   const Eigen::Vector3d a(1.0, 100.0, 1e4), c(1.0, -2.0, 3.0);

@@ -93,8 +93,9 @@ int count_inverted(const MatX3d& X, const MatX4i& T, const deform::ArapRest& res
 
 // Local untangling: Gauss-Seidel sweeps over the vertices within `rings` tet rings of the
 // inverted tets, each moved along its free axes (fixed(v, k) false; planes' heights stay) by a
-// Newton step on the elliptic energy of its tets (Realizer::untangle_elliptic), the 3 x 3 Hessian by central
-// differences of the exact gradient and made definite, with backtracking. eps follows the
+// Newton step on the elliptic energy of its tets (Realizer::untangle_elliptic), the exact 3 x 3
+// Hessian (deform::untangle_tet_corner; next to the energy's wall, central differences of the
+// gradient) made definite, with backtracking. eps follows the
 // region's smallest volume ratio. After a global solve a few inverted tets often remain where
 // the global preconditioner (the ARAP matrix) says nothing about their vertices; here each
 // vertex sees only its own tets. Returns the sweeps taken.
@@ -163,6 +164,7 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
         for (int k = 0; k < 3; ++k)
           if (!fixed(v, k)) free_axes[nf++] = k;
         if (nf == 0) continue;
+        // Energy of v's tets with v at p, and their gradient over v's coordinates.
         auto star = [&](const Eigen::RowVector3d& p, Vec3* g) {
           const Eigen::RowVector3d keep = X.row(v);
           X.row(v) = p;
@@ -182,11 +184,31 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
         double len = 0;
         for (int t : vt[v]) len += (X.row(T_(t, 0)) - X.row(T_(t, 1))).norm();
         len /= std::max<size_t>(1, vt[v].size());
-        Vec3 g;
-        const double E0 = star(p0, &g);
+        // Energy, gradient and exact 3 x 3 Hessian of v's tets at v's position.
+        Vec3 g = Vec3::Zero();
+        Eigen::Matrix3d H3 = Eigen::Matrix3d::Zero();
+        double E0 = 0, wall = 0;
+        for (int t : vt[v]) {
+          int j = 0;
+          while (T_(t, j) != v) ++j;
+          Vec3 gt;
+          Eigen::Matrix3d Ht;
+          double w;
+          E0 += deform::untangle_tet_corner(X, T_, arap_rest_, t, j, eps, s, theta, &gt, &Ht, &w);
+          g += gt;
+          H3 += Ht;
+          wall = std::max(wall, w);
+        }
         Eigen::VectorXd gf(nf);
         Eigen::MatrixXd H(nf, nf);
-        for (int a = 0; a < nf; ++a) gf[a] = g[free_axes[a]];
+        for (int a = 0; a < nf; ++a) {
+          gf[a] = g[free_axes[a]];
+          for (int b = 0; b < nf; ++b) H(a, b) = H3(free_axes[a], free_axes[b]);
+        }
+        // Next to a wall (the curvature changing by a percent within 1e-6 len) the Hessian is the
+        // central difference of the gradient over +-1e-6 len, which sees the wall's growth (the
+        // exact one at the point gave longer steps into it: spot, one more tet left inverted per
+        // untangling, and no realization).
         double hstep = 1e-6 * len;
         if (flat > 0) {
           // Nearly flat tets: v may be far closer than 1e-6 len to the plane of an opposite face,
@@ -202,15 +224,16 @@ int untangle_locally(const MatX4i& T_, const deform::ArapRest& arap_rest_, Fixed
           }
           hstep = std::max(hstep, 1e-15 * len);
         }
-        for (int b = 0; b < nf; ++b) {
-          Eigen::RowVector3d pp = p0, pm = p0;
-          pp[free_axes[b]] += hstep;
-          pm[free_axes[b]] -= hstep;
-          Vec3 gp, gm;
-          star(pp, &gp);
-          star(pm, &gm);
-          for (int a = 0; a < nf; ++a) H(a, b) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * hstep);
-        }
+        if (wall * hstep > 1e-4)
+          for (int b = 0; b < nf; ++b) {
+            Eigen::RowVector3d pp = p0, pm = p0;
+            pp[free_axes[b]] += hstep;
+            pm[free_axes[b]] -= hstep;
+            Vec3 gp, gm;
+            star(pp, &gp);
+            star(pm, &gm);
+            for (int a = 0; a < nf; ++a) H(a, b) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * hstep);
+          }
         H = 0.5 * (H + H.transpose()).eval();
         Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
         Eigen::VectorXd ev = es.eigenvalues();

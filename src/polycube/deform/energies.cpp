@@ -555,6 +555,50 @@ double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& res
   return rest.w[t] * ((1 - theta) * f + theta * g);
 }
 
+double untangle_tet_corner(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, int j, double eps,
+                           double scale, double theta, Vec3* grad, Eigen::Matrix3d* hess, double* wall) {
+  const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+  Eigen::Matrix3d Ds;
+  for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+  const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+  const Eigen::Matrix3d J = Ds * Di / scale;
+  const double D = J.determinant();
+  const double root = std::sqrt(eps * eps + D * D);
+  const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
+  const double S = J.squaredNorm(), f = S / chi23, g = (D * D + 1) / chi;
+  const double E = rest.w[t] * ((1 - theta) * f + theta * g);
+  if (!grad && !hess) return E;
+  // J = J0 + (x - x0) b^T / scale with b the corner's shape gradient, so along x:
+  // dS = s = 2 J b / scale, d2S = 2 |b|^2 / scale^2 I, dD = d = cof b / scale, d2D = 0.
+  const Vec3 b = shape_gradients(Di).row(j).transpose();
+  Eigen::Matrix3d cof;
+  cof.col(0) = J.col(1).cross(J.col(2));
+  cof.col(1) = J.col(2).cross(J.col(0));
+  cof.col(2) = J.col(0).cross(J.col(1));
+  const Vec3 sv = 2 * J * b / scale, d = cof * b / scale;
+  if (wall) *wall = d.norm() / root;
+  const double c1 = chi / root;                        // chi'(D)
+  const double c2 = chi * (root - D) / (root * root * root);  // chi''(D)
+  const double chi53 = chi23 * chi;                    // chi^(5/3)
+  // f = S chi^(-2/3): f_S = chi^(-2/3), f_D = -(2/3) S chi^(-5/3) chi'.
+  const double fD = -(2.0 / 3.0) * S / chi53 * c1;
+  // g = (D^2 + 1) / chi.
+  const double gD = (2 * D - g * c1) / chi;
+  const double a = rest.w[t] * (1 - theta), c = rest.w[t] * theta;
+  if (grad) *grad = a * (sv / chi23 + fD * d) + c * gD * d;
+  if (hess) {
+    const double fSD = -(2.0 / 3.0) / chi53 * c1;
+    const double fDD = S * ((10.0 / 9.0) / (chi53 * chi) * c1 * c1 - (2.0 / 3.0) / chi53 * c2);
+    const double gDD = 2 / chi - 4 * D * c1 / (chi * chi) - (D * D + 1) * c2 / (chi * chi) +
+                       2 * (D * D + 1) * c1 * c1 / (chi * chi * chi);
+    const double sigma = 2 * b.squaredNorm() / (scale * scale);
+    *hess = a * (sigma / chi23 * Eigen::Matrix3d::Identity() + fSD * (sv * d.transpose() + d * sv.transpose()) +
+                 fDD * d * d.transpose()) +
+            c * gDD * d * d.transpose();
+  }
+  return E;
+}
+
 double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double eps, double scale,
                        double theta, Eigen::VectorXd* grad) {
   double E = 0;

@@ -181,6 +181,15 @@ double untangle_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, d
 double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps, double scale,
                            double theta, Eigen::Matrix<double, 12, 1>* grad);
 
+/// The term of untangle_energy for tet t as a function of its corner j (0..3) alone: `grad` and
+/// `hess` (optional) receive the exact gradient and Hessian over that corner's 3 coordinates. The
+/// volume is affine in one corner, so the Hessian has a closed form (no differences across the
+/// energy's steep walls near D = 0). Not made definite. `wall` (optional, with grad or hess):
+/// |dD/dx| / sqrt(eps^2 + D^2), the inverse of the distance over which the corner's move changes
+/// the energy's curvature (large next to the wall D = 0).
+double untangle_tet_corner(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, int j, double eps,
+                           double scale, double theta, Vec3* grad, Eigen::Matrix3d* hess, double* wall = nullptr);
+
 /// Anti-foldover log barrier (Eq. 11): -sum_pairs log(1 + n_f . n_g). Returns +inf when a pair
 /// folds over (1 + n_f . n_g <= 0). Hessian: Gauss-Newton (grad D grad D^T / D^2).
 double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>& pairs, double weight,
