@@ -529,23 +529,45 @@ double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<Thic
   return weight * E;
 }
 
-double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps, double scale,
-                           double theta, Eigen::Matrix<double, 12, 1>* grad) {
+namespace {
+// The quantities of one tet's untangling term: J = F / scale, D = det J, sqrt(eps^2 + D^2),
+// chi(D), chi^(2/3), |J|^2, the two parts f and g, and the cofactor matrix dD/dJ (any sign of D).
+struct UntangleTerms {
+  Eigen::Matrix3d J, cof;
+  double D, root, chi, chi23, S, f, g;
+};
+UntangleTerms untangle_terms(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps,
+                             double scale, bool cofactors) {
+  UntangleTerms u;
   const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
   Eigen::Matrix3d Ds;
   for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+  u.J = Ds * rest.Dm_inv[t] / scale;
+  u.D = u.J.determinant();
+  u.root = std::sqrt(eps * eps + u.D * u.D);
+  u.chi = 0.5 * (u.D + u.root);
+  u.chi23 = std::cbrt(u.chi * u.chi);
+  u.S = u.J.squaredNorm();
+  u.f = u.S / u.chi23;
+  u.g = (u.D * u.D + 1) / u.chi;
+  if (cofactors) {
+    u.cof.col(0) = u.J.col(1).cross(u.J.col(2));
+    u.cof.col(1) = u.J.col(2).cross(u.J.col(0));
+    u.cof.col(2) = u.J.col(0).cross(u.J.col(1));
+  }
+  return u;
+}
+}  // namespace
+
+double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, double eps, double scale,
+                           double theta, Eigen::Matrix<double, 12, 1>* grad) {
+  const UntangleTerms u = untangle_terms(X, T, rest, t, eps, scale, grad != nullptr);
+  const Eigen::Matrix3d& J = u.J;
+  const Eigen::Matrix3d& cof = u.cof;
+  const double D = u.D, root = u.root, chi = u.chi, chi23 = u.chi23, f = u.f, g = u.g;
   const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-  const Eigen::Matrix3d J = Ds * Di / scale;
-  const double D = J.determinant();
-  const double root = std::sqrt(eps * eps + D * D);
-  const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
-  const double f = J.squaredNorm() / chi23, g = (D * D + 1) / chi;
   if (grad) {
     const double dchi = chi / root;  // chi'(D)
-    Eigen::Matrix3d cof;             // dD/dJ, valid for any sign of D
-    cof.col(0) = J.col(1).cross(J.col(2));
-    cof.col(1) = J.col(2).cross(J.col(0));
-    cof.col(2) = J.col(0).cross(J.col(1));
     const Eigen::Matrix3d dEdF = rest.w[t] / scale *
                                  ((1 - theta) * (2 * J / chi23 - (2.0 / 3.0) * f / chi * dchi * cof) +
                                   theta * ((2 * D - g * dchi) / chi) * cof);
@@ -557,24 +579,16 @@ double untangle_tet_energy(const MatX3d& X, const MatX4i& T, const ArapRest& res
 
 double untangle_tet_corner(const MatX3d& X, const MatX4i& T, const ArapRest& rest, int t, int j, double eps,
                            double scale, double theta, Vec3* grad, Eigen::Matrix3d* hess, double* wall) {
-  const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-  Eigen::Matrix3d Ds;
-  for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-  const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-  const Eigen::Matrix3d J = Ds * Di / scale;
-  const double D = J.determinant();
-  const double root = std::sqrt(eps * eps + D * D);
-  const double chi = 0.5 * (D + root), chi23 = std::cbrt(chi * chi);
-  const double S = J.squaredNorm(), f = S / chi23, g = (D * D + 1) / chi;
-  const double E = rest.w[t] * ((1 - theta) * f + theta * g);
-  if (!grad && !hess) return E;
+  const bool derivatives = grad || hess;
+  const UntangleTerms u = untangle_terms(X, T, rest, t, eps, scale, derivatives);
+  const Eigen::Matrix3d& J = u.J;
+  const Eigen::Matrix3d& cof = u.cof;
+  const double D = u.D, root = u.root, chi = u.chi, chi23 = u.chi23, S = u.S, g = u.g;
+  const double E = rest.w[t] * ((1 - theta) * u.f + theta * g);
+  if (!derivatives) return E;
   // J = J0 + (x - x0) b^T / scale with b the corner's shape gradient, so along x:
   // dS = s = 2 J b / scale, d2S = 2 |b|^2 / scale^2 I, dD = d = cof b / scale, d2D = 0.
-  const Vec3 b = shape_gradients(Di).row(j).transpose();
-  Eigen::Matrix3d cof;
-  cof.col(0) = J.col(1).cross(J.col(2));
-  cof.col(1) = J.col(2).cross(J.col(0));
-  cof.col(2) = J.col(0).cross(J.col(1));
+  const Vec3 b = shape_gradients(rest.Dm_inv[t]).row(j).transpose();
   const Vec3 sv = 2 * J * b / scale, d = cof * b / scale;
   if (wall) *wall = d.norm() / root;
   const double c1 = chi / root;                        // chi'(D)
