@@ -24,38 +24,44 @@ namespace {
 // Corners: the three edges leaving each corner, in Verdict's order (right-handed for a positive hex).
 constexpr int kCorner[8][4] = {{0, 1, 3, 4}, {1, 2, 0, 5}, {2, 3, 1, 6}, {3, 0, 2, 7},
                                {4, 7, 5, 0}, {5, 4, 6, 1}, {6, 5, 7, 2}, {7, 6, 4, 3}};
-}  // namespace
+// Centre: the three principal axes (Verdict's calc_hex_efg 1, 2, 3), as signs of the corners.
+constexpr double kXi[8] = {-1, 1, 1, -1, -1, 1, 1, -1}, kEt[8] = {-1, -1, 1, 1, -1, -1, 1, 1},
+                 kZe[8] = {-1, -1, -1, -1, 1, 1, 1, 1};
 
-double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k) {
-  if (k < 8) {
-    const auto& c = kCorner[k];
-    return normalized_det(p[c[1]] - p[c[0]], p[c[2]] - p[c[0]], p[c[3]] - p[c[0]]);
-  }
-  // Centre: the three principal axes (Verdict's calc_hex_efg 1, 2, 3).
-  const Vec3 xi = (p[1] - p[0]) + (p[2] - p[3]) + (p[5] - p[4]) + (p[6] - p[7]);
-  const Vec3 et = (p[3] - p[0]) + (p[2] - p[1]) + (p[7] - p[4]) + (p[6] - p[5]);
-  const Vec3 ze = (p[4] - p[0]) + (p[5] - p[1]) + (p[6] - p[2]) + (p[7] - p[3]);
-  return normalized_det(xi, et, ze);
-}
-
-double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int j, Vec3& grad) {
-  Vec3 a, b, c;
-  double ca, cb, cc;  // d(a, b, c) / d p[j], each a multiple of the identity
+// The three vectors whose normalized determinant is sample k (0..7: corner k's edges, 8: the
+// centre's principal axes).
+void sample_vectors(const std::array<Vec3, 8>& p, int k, Vec3& a, Vec3& b, Vec3& c) {
   if (k < 8) {
     const auto& q = kCorner[k];
     a = p[q[1]] - p[q[0]];
     b = p[q[2]] - p[q[0]];
     c = p[q[3]] - p[q[0]];
+    return;
+  }
+  a = (p[1] - p[0]) + (p[2] - p[3]) + (p[5] - p[4]) + (p[6] - p[7]);
+  b = (p[3] - p[0]) + (p[2] - p[1]) + (p[7] - p[4]) + (p[6] - p[5]);
+  c = (p[4] - p[0]) + (p[5] - p[1]) + (p[6] - p[2]) + (p[7] - p[3]);
+}
+}  // namespace
+
+double scaled_jacobian_sample(const std::array<Vec3, 8>& p, int k) {
+  Vec3 a, b, c;
+  sample_vectors(p, k, a, b, c);
+  return normalized_det(a, b, c);
+}
+
+double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int j, Vec3& grad) {
+  Vec3 a, b, c;
+  sample_vectors(p, k, a, b, c);
+  // d(a, b, c) / d p[j], each a multiple of the identity.
+  double ca, cb, cc;
+  if (k < 8) {
+    const auto& q = kCorner[k];
     const double o = j == q[0] ? 1.0 : 0.0;
     ca = (j == q[1] ? 1.0 : 0.0) - o;
     cb = (j == q[2] ? 1.0 : 0.0) - o;
     cc = (j == q[3] ? 1.0 : 0.0) - o;
   } else {
-    a = (p[1] - p[0]) + (p[2] - p[3]) + (p[5] - p[4]) + (p[6] - p[7]);
-    b = (p[3] - p[0]) + (p[2] - p[1]) + (p[7] - p[4]) + (p[6] - p[5]);
-    c = (p[4] - p[0]) + (p[5] - p[1]) + (p[6] - p[2]) + (p[7] - p[3]);
-    constexpr double kXi[8] = {-1, 1, 1, -1, -1, 1, 1, -1}, kEt[8] = {-1, -1, 1, 1, -1, -1, 1, 1},
-                     kZe[8] = {-1, -1, -1, -1, 1, 1, 1, 1};
     ca = kXi[j];
     cb = kEt[j];
     cc = kZe[j];
