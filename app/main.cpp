@@ -197,7 +197,8 @@ int main(int argc, char** argv) {
   app.add_option("--local-first", rz.local_first,
                  "Polycube realization: after landing on the planes (or the relaxation of Eq. 17), the local "
                  "untangling runs first; when it leaves at most N tets inverted the elliptic untangling is "
-                 "skipped; -1 = off (the elliptic untangling first)")
+                 "skipped (surface mode: triangles folded, the global untangling rounds skipped); -1 = off (the elliptic "
+                 "untangling first)")
       ->capture_default_str()->check(CLI::Range(-1, 1000000));
   app.add_option("--continuation-retries", rz.continuation_retries,
                  "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "

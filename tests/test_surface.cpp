@@ -180,6 +180,43 @@ TEST(SurfacePolycube, EdgeCollapseRemovesAChartEdgeSegmentRunningTheWrongWay) {
   EXPECT_LT(r.planarity_error, 1e-12);
 }
 
+TEST(SurfacePolycube, LocalUntanglingUnfoldsTrianglesInsideCharts) {
+  // An 8 x 8 grid box whose layout has three vertices of the +Z face pushed across their
+  // neighbours (folding the triangles around them) and one of the -X face likewise: the local
+  // untangling alone unfolds them (the global rounds never run), and the ARAP iterations that
+  // follow keep every triangle facing its label. With it off, the global rounds do the same.
+  const auto s = grid_box(8);
+  const std::vector<int> labels = chart::label_by_normal(s.V, s.F);
+  MatX3d X = s.V;
+  auto find = [&](double x, double y, double z) {
+    for (int v = 0; v < s.V.rows(); ++v)
+      if ((s.V.row(v) - Eigen::RowVector3d(x, y, z)).norm() < 1e-12) return v;
+    return -1;
+  };
+  const int a = find(0.5, 0.5, 1), b = find(0.25, 0.75, 1), c = find(0.75, 0.25, 1), d = find(0, 0.5, 0.5);
+  ASSERT_TRUE(a >= 0 && b >= 0 && c >= 0 && d >= 0);
+  X(a, 0) += 0.2;
+  X(b, 1) -= 0.19;
+  X(c, 0) -= 0.17;
+  X(c, 1) += 0.16;
+  X(d, 2) += 0.21;
+  const double diag = std::sqrt(3.0);
+  ASSERT_GE(chart::count_misoriented(X, s.F, labels, diag), 8);
+  const chart::RealizeResult r = chart::realize_surface_polycube(s.V, s.F, X, labels, {}, {}, &X);
+  ASSERT_TRUE(r.success) << r.failure;
+  EXPECT_EQ(chart::count_misoriented(r.X, s.F, labels, diag), 0);
+  EXPECT_LT(r.planarity_error, 1e-12);
+  EXPECT_EQ(r.untangle_iterations, 0) << "the global untangling ran";
+  // The box is the rest shape: ARAP brings the layout back to it.
+  EXPECT_LT((r.X - s.V).cwiseAbs().maxCoeff(), 1e-3);
+  chart::RealizeOptions global_only;
+  global_only.local_first = -1;
+  const chart::RealizeResult g = chart::realize_surface_polycube(s.V, s.F, X, labels, global_only, {}, &X);
+  ASSERT_TRUE(g.success) << g.failure;
+  EXPECT_EQ(chart::count_misoriented(g.X, s.F, labels, diag), 0);
+  EXPECT_GT(g.untangle_iterations, 0);
+}
+
 TEST(SurfacePolycube, SphereGivesACube) {
   const auto s = sphere(4);
   const auto e = surface_polycube(s);

@@ -81,6 +81,37 @@ Distortion isometric_distortion_surface(const MatX3d& rest, const MatX3d& X, con
   return d;
 }
 
+namespace {
+double chi(double D, double eps) { return 0.5 * (D + std::sqrt(eps * eps + D * D)); }
+
+// Elliptic untangling energy (Garanzha et al. 2021, 2D) of one triangle laid out in its chart's
+// plane: corners q (mirrored for negative labels so that facing the label = positive area), rest
+// shape Dm_inv, lengths divided by scale, weight w. det: the Jacobian's determinant; gq (optional):
+// the gradient with respect to each corner.
+double untangle_triangle(const Eigen::Vector2d q[3], const Eigen::Matrix2d& Dm_inv, double scale, double w, double eps,
+                         double theta, double& det, Eigen::Vector2d* gq) {
+  Eigen::Matrix2d Ds;
+  Ds << q[1] - q[0], q[2] - q[0];
+  const Eigen::Matrix2d J = Ds * Dm_inv / scale;
+  const double D = J.determinant();
+  det = D;
+  const double c = chi(D, eps), r2 = std::sqrt(eps * eps + D * D);
+  const double tr = J.squaredNorm();
+  const double E = w * ((1 - theta) * tr / c + theta * (1 + D * D) / c);
+  if (!gq) return E;
+  Eigen::Matrix2d cof;
+  cof << J(1, 1), -J(1, 0), -J(0, 1), J(0, 0);
+  const double dc = c / r2;  // d chi / dD
+  const Eigen::Matrix2d dJ = w * ((1 - theta) * (2 * J / c - tr / (c * c) * dc * cof) +
+                                  theta * (2 * D / c - (1 + D * D) / (c * c) * dc) * cof);
+  const Eigen::Matrix2d G = dJ * Dm_inv.transpose() / scale;  // d E / d Ds
+  gq[0] = -(G.col(0) + G.col(1));
+  gq[1] = G.col(0);
+  gq[2] = G.col(1);
+  return E;
+}
+}  // namespace
+
 RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, const MatX3d& deformed,
                                        const std::vector<int>& labels, const RealizeOptions& opt,
                                        const Hooks& hooks, const MatX3d* start) {
@@ -226,6 +257,126 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     yy = y;
     return X;
   };
+  // Local untangling: Gauss-Seidel sweeps of Newton steps, one vertex at a time over its free
+  // coordinates (those no plane holds), on the elliptic energy of its triangles, around the
+  // misoriented triangles (within two rings, found again every sweep). A handful of folds near
+  // chart borders is what the starts leave; the global rounds below cost a linear solve per
+  // L-BFGS iteration over the whole surface for them. Returns the fewest misoriented triangles
+  // reached (X holds that state).
+  std::vector<std::vector<int>> vf(n);
+  for (int f = 0; f < F.rows(); ++f)
+    for (int j = 0; j < 3; ++j) vf[F(f, j)].push_back(f);
+  auto untangle_locally = [&](MatX3d& X, const std::vector<Eigen::Matrix2d>& Dm_inv, double scale,
+                              double theta) {
+    // The layout of triangle f with vertex v at p (2D, mirrored for negative labels).
+    auto layout = [&](int f, int v, const Vec3& p, Eigen::Vector2d q[3], int& corner) {
+      const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+      const double sg = labels[f] % 2 ? -1.0 : 1.0;
+      for (int j = 0; j < 3; ++j) {
+        const int u = F(f, j);
+        if (u == v) corner = j;
+        const Vec3 x = u == v ? p : Vec3(X.row(u).transpose());
+        q[j] = Eigen::Vector2d(sg * x[a], x[b]);
+      }
+    };
+    auto star = [&](int v, const Vec3& p, double eps, Vec3* g) {
+      double E = 0;
+      if (g) g->setZero();
+      for (int f : vf[v]) {
+        Eigen::Vector2d q[3], gq[3];
+        int j = 0;
+        layout(f, v, p, q, j);
+        double D;
+        E += untangle_triangle(q, Dm_inv[f], scale, ar.w[f], eps, theta, D, g ? gq : nullptr);
+        if (!g) continue;
+        const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+        (*g)[a] += (labels[f] % 2 ? -1.0 : 1.0) * gq[j][0];
+        (*g)[b] += gq[j][1];
+      }
+      return E;
+    };
+    auto det_of = [&](int f) {
+      Eigen::Vector2d q[3];
+      int j = 0;
+      layout(f, -1, Vec3::Zero(), q, j);
+      double D;
+      untangle_triangle(q, Dm_inv[f], scale, 1.0, 1.0, theta, D, nullptr);
+      return D;
+    };
+    int best = misoriented(X), since_best = 0;
+    MatX3d X_best = X;
+    std::vector<char> in(n, 0);
+    for (int sweep = 0; sweep < 100 && best > 0 && since_best < 10; ++sweep) {
+      std::vector<int> region;
+      std::fill(in.begin(), in.end(), 0);
+      for (int f = 0; f < F.rows(); ++f)
+        if (!faces_label(X, F(f, 0), F(f, 1), F(f, 2), labels[f], diag0))
+          for (int j = 0; j < 3; ++j)
+            if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
+      for (int ring = 0; ring < 2; ++ring) {
+        const size_t m = region.size();
+        for (size_t i = 0; i < m; ++i)
+          for (int f : vf[region[i]])
+            for (int j = 0; j < 3; ++j)
+              if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
+      }
+      double dmin = std::numeric_limits<double>::infinity();
+      for (int v : region)
+        for (int f : vf[v]) dmin = std::min(dmin, det_of(f));
+      const double eps = dmin < 0 ? std::max(1e-12, 0.1 * -dmin) : 1e-8;
+      for (int inner = 0; inner < 10; ++inner)
+        for (int v : region) {
+          int free_axes[3], nf = 0;
+          for (int k = 0; k < 3; ++k)
+            if (var[k][v] >= r.planes[k]) free_axes[nf++] = k;
+          if (nf == 0 || vf[v].empty()) continue;
+          const Vec3 p0 = X.row(v).transpose();
+          double len = 0;
+          for (int f : vf[v]) len += (X.row(F(f, 0)) - X.row(F(f, 1))).norm();
+          len /= static_cast<double>(vf[v].size());
+          if (!(len > 0)) continue;
+          Vec3 g3;
+          const double E0 = star(v, p0, eps, &g3);
+          // Hessian over the free coordinates: central differences of the gradient.
+          const double h = 1e-6 * len;
+          Eigen::Vector2d gf;
+          Eigen::Matrix2d H = Eigen::Matrix2d::Identity();
+          for (int c = 0; c < nf; ++c) {
+            gf[c] = g3[free_axes[c]];
+            Vec3 pp = p0, pm = p0, gp, gm;
+            pp[free_axes[c]] += h;
+            pm[free_axes[c]] -= h;
+            star(v, pp, eps, &gp);
+            star(v, pm, eps, &gm);
+            for (int a = 0; a < nf; ++a) H(a, c) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * h);
+          }
+          const Eigen::MatrixXd Hs = 0.5 * (H.topLeftCorner(nf, nf) + H.topLeftCorner(nf, nf).transpose());
+          Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hs);
+          Eigen::VectorXd ev = es.eigenvalues();
+          const double floor = 1e-8 * std::max(ev.cwiseAbs().maxCoeff(), 1e-300);
+          for (int a = 0; a < nf; ++a) ev[a] = std::max(std::abs(ev[a]), floor);
+          const Eigen::VectorXd gv = gf.head(nf);
+          const Eigen::VectorXd df = -es.eigenvectors() * (es.eigenvectors().transpose() * gv).cwiseQuotient(ev);
+          const double slope = df.dot(gv);
+          if (!(slope < 0)) continue;
+          Vec3 d = Vec3::Zero();
+          for (int a = 0; a < nf; ++a) d[free_axes[a]] = df[a];
+          double step = d.norm() > 0.5 * len ? 0.5 * len / d.norm() : 1.0;
+          for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+            const Vec3 p = p0 + step * d;
+            if (star(v, p, eps, nullptr) <= E0 + 1e-4 * step * slope) {
+              X.row(v) = p.transpose();
+              break;
+            }
+          }
+        }
+      const int m = misoriented(X);
+      if (m < best) best = m, since_best = 0, X_best = X;
+      else ++since_best;
+    }
+    X = X_best;
+    return best;
+  };
   auto untangle = [&](MatX3d& X) {
     if (misoriented(X) == 0) return;
     // Elliptic untangling (Garanzha et al. 2021, 2D) of the chart layouts: every triangle in its
@@ -234,10 +385,6 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     // eps decreasing by the paper's rule.
     std::array<int, 4> off{0, 0, 0, 0};
     for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + nvar[k];
-    // Unknowns from X (each variable's value is shared by its vertices).
-    Eigen::VectorXd z(off[3]);
-    for (int v = 0; v < n; ++v)
-      for (int k = 0; k < 3; ++k) z[off[k] + var[k][v]] = X(v, k);
     std::vector<Eigen::Matrix2d> Dm_inv(F.rows());
     double rest_area = 0, poly_area = 0;
     for (int f = 0; f < F.rows(); ++f) {
@@ -252,7 +399,17 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     }
     const double scale = std::sqrt(poly_area / std::max(rest_area, 1e-300));
     const double theta = 1.0 / 128;
-    auto chi = [](double D, double eps) { return 0.5 * (D + std::sqrt(eps * eps + D * D)); };
+    if (opt.local_first >= 0) {
+      const int before = misoriented(X);
+      const int m = untangle_locally(X, Dm_inv, scale, theta);
+      hooks.debug("surface local untangling: " + std::to_string(before) + " -> " + std::to_string(m) +
+                  " misoriented triangles");
+      if (m <= opt.local_first) return;
+    }
+    // Unknowns from X (each variable's value is shared by its vertices).
+    Eigen::VectorXd z(off[3]);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k) z[off[k] + var[k][v]] = X(v, k);
     double min_det = 0;
     auto energy = [&](const Eigen::VectorXd& zz, double eps, Eigen::VectorXd* g) {
       if (g) g->setZero(zz.size());
@@ -264,23 +421,11 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
         Eigen::Vector2d q[3];
         for (int j = 0; j < 3; ++j)
           q[j] = Eigen::Vector2d(sg * zz[off[a] + var[a][F(f, j)]], zz[off[b] + var[b][F(f, j)]]);
-        Eigen::Matrix2d Ds;
-        Ds << q[1] - q[0], q[2] - q[0];
-        const Eigen::Matrix2d J = Ds * Dm_inv[f] / scale;
-        const double D = J.determinant();
+        double D;
+        Eigen::Vector2d gq[3];
+        E += untangle_triangle(q, Dm_inv[f], scale, ar.w[f], eps, theta, D, g ? gq : nullptr);
         min_det = std::min(min_det, D);
-        const double c = chi(D, eps), r2 = std::sqrt(eps * eps + D * D);
-        const double tr = J.squaredNorm();
-        const double w = ar.w[f];
-        E += w * ((1 - theta) * tr / c + theta * (1 + D * D) / c);
         if (!g) continue;
-        Eigen::Matrix2d cof;
-        cof << J(1, 1), -J(1, 0), -J(0, 1), J(0, 0);
-        const double dc = c / r2;  // d chi / dD
-        const Eigen::Matrix2d dJ = w * ((1 - theta) * (2 * J / c - tr / (c * c) * dc * cof) +
-                                        theta * (2 * D / c - (1 + D * D) / (c * c) * dc) * cof);
-        const Eigen::Matrix2d G = dJ * Dm_inv[f].transpose() / scale;  // d E / d Ds
-        const Eigen::Vector2d gq[3] = {-(G.col(0) + G.col(1)), G.col(0), G.col(1)};
         for (int j = 0; j < 3; ++j) {
           const int ia = off[a] + var[a][F(f, j)], ib = off[b] + var[b][F(f, j)];
           if (var[a][F(f, j)] >= r.planes[a]) (*g)[ia] += sg * gq[j][0];

@@ -496,7 +496,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
        << " s (numeric factorizations " << t_numfac << " s), line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
        << " factorizations, " << cg_iterations << " preconditioned CG iterations (and " << cg_failed_iterations
-       << " in " << cg_failures << " solves over the limit)";
+       << " in " << cg_failures << " solves over the limit); system " << sys.values().size() << " nonzeros, factor "
+       << sys.factor_nonzeros() << " nonzeros, " << sys.factor_flops() << " flops";
     hooks.debug(os.str());
   }
   // Back to input units, centred where the input was.

@@ -180,6 +180,9 @@ double SparseSystem::factor_to_cg_cost() const {
   return cg > 0 ? c.fl / cg : 0;
 }
 
+double SparseSystem::factor_nonzeros() const { return llt_ ? llt_->cholmod().lnz : 0; }
+double SparseSystem::factor_flops() const { return llt_ ? llt_->cholmod().fl : 0; }
+
 Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b, int slot) const {
   POLYCUBE_ASSERT(llt_ && slot >= 0 && slot < kSlots, "solve without a factorization or with a bad slot");
   Slot& s = slots_[slot];

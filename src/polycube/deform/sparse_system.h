@@ -61,6 +61,9 @@ class SparseSystem : public HessianSink {
   /// timings): floating-point operations of a factorization over those of one preconditioned CG
   /// iteration (two triangular solves with the factor and one product with the matrix).
   double factor_to_cg_cost() const;
+  /// Nonzeros of the last factor and flops of one factorization (CHOLMOD's counts; 0 before one).
+  double factor_nonzeros() const;
+  double factor_flops() const;
   /// x = A^-1 b with the last factorization. Calls with different `slot`s may run concurrently.
   Eigen::VectorXd solve(const Eigen::VectorXd& b, int slot = 0) const;
   /// Applies the preconditioner: A^-1 b with the single-precision copy of the last factorization
