@@ -269,6 +269,13 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
         }
       }
     }
+    if (hooks.log) {
+      double lo = 1e300, sum = 0;
+      for (double w : hex_worst) lo = std::min(lo, w), sum += w;
+      hooks.debug("hex optimization sweep " + std::to_string(sweep) + ": " + std::to_string(moves) +
+                  " moves, worst sample min " + std::to_string(lo) + " mean " +
+                  std::to_string(sum / std::max<Eigen::Index>(1, H.rows())));
+    }
     if (moves == 0) break;
   }
   return st;
