@@ -215,6 +215,11 @@ int main(int argc, char** argv) {
                  "mesh's vertices and tets (e.g. OUTDIR/polycube.mesh with OUTDIR/tetmesh.mesh as the input, or "
                  "another tool's polycube map)")
       ->check(CLI::ExistingFile);
+  app.add_option("--deformed", opt.deformed,
+                 "Skip the deformation: extract the polycube from this deformed tet mesh, which has the input tet "
+                 "mesh's vertices and tets (e.g. OUTDIR/deformed.mesh with OUTDIR/tetmesh.mesh as the input), to try "
+                 "other extraction or hex options")
+      ->check(CLI::ExistingFile);
   bool no_cleanup = false;
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
   app.add_option("--collapsed-ratio", opt.polycube.collapsed_ratio,

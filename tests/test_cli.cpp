@@ -557,6 +557,41 @@ TEST(Cli, FeatureConstraintsFollowTheRemeshedSurface) {
   EXPECT_GT(input_edges, 0);
 }
 
+TEST(Cli, PolycubeFromAGivenDeformation) {
+  std::string dir = temp_dir("given_deformed");
+  ASSERT_EQ(run_cli("--example box_hole --until deform -q -o " + dir + "/a").code, 0);
+  ASSERT_EQ(run_cli("--example box_hole --until polycube -q -o " + dir + "/full").code, 0);
+  // The extraction from the saved deformation is the full run's: the same polycube, to the bit.
+  RunResult r = run_cli(dir + "/a/tetmesh.mesh --deformed " + dir + "/a/deformed.mesh --until polycube -o " + dir + "/b");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json a = report(dir + "/a"), b = report(dir + "/b"), full = report(dir + "/full");
+  EXPECT_EQ(b["polycube"]["source"], dir + "/a/deformed.mesh");
+  EXPECT_NEAR(b["polycube"]["l1_quality"].get<double>(), a["polycube"]["l1_quality"].get<double>(), 1e-6);
+  EXPECT_NEAR(b["polycube"]["deformed_arap_distortion"].get<double>(), a["polycube"]["arap_distortion"].get<double>(),
+              1e-9);
+  EXPECT_EQ(b["polycube"]["charts"], full["polycube"]["charts"]);
+  EXPECT_EQ(b["polycube"]["corners"], full["polycube"]["corners"]);
+  EXPECT_EQ(b["polycube"]["arap_distortion"], full["polycube"]["arap_distortion"]);
+  // The same polycube vertices, to the bit (the boundary triangles come in the tet file's order).
+  auto vertices = [&](const std::string& path) {
+    const std::string t = read_text(path);
+    return t.substr(0, t.find("Triangles"));
+  };
+  EXPECT_TRUE(vertices(dir + "/b/polycube.mesh") == vertices(dir + "/full/polycube.mesh"));
+  EXPECT_FALSE(fs::exists(dir + "/b/deformed.mesh"));
+  // Another tet mesh than the deformation's: exit 4, naming the file and the counts.
+  r = run_cli("--example torus --until tet -q -o " + dir + "/t");
+  ASSERT_EQ(r.code, 0) << r.output;
+  r = run_cli(dir + "/t/tetmesh.mesh --deformed " + dir + "/a/deformed.mesh --until polycube -o " + dir + "/c");
+  EXPECT_EQ(r.code, 4) << r.output;
+  EXPECT_NE(r.output.find("deformed.mesh: a deformed mesh must have the tet mesh's vertices and tets"), std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir + "/c/polycube.mesh"));
+  // A surface input: exit 2.
+  r = run_cli(dir + "/a/surface.mesh --deformed " + dir + "/a/deformed.mesh --until polycube -o " + dir + "/d");
+  EXPECT_EQ(r.code, 2) << r.output;
+}
+
 TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   std::string dir = temp_dir("given_map");
   ASSERT_EQ(run_cli("--example box_hole -q -o " + dir + "/a").code, 0);

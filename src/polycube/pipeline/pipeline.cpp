@@ -203,6 +203,14 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                     "tetmesh.mesh with its polycube.mesh), not a " +
                                         std::string(in.H.rows() > 0 ? "hex mesh" : "surface"));
     if (given_map && opt.surface) throw Error(ErrorKind::Usage, "--polycube-map takes a tet mesh polycube: drop --surface");
+    const bool given_deformed = !opt.deformed.empty();
+    if (given_deformed && in.T.rows() == 0)
+      throw Error(ErrorKind::Usage, "--deformed needs the deformed mesh's tet mesh as the input (e.g. an earlier run's "
+                                    "tetmesh.mesh with its deformed.mesh), not a " +
+                                        std::string(in.H.rows() > 0 ? "hex mesh" : "surface"));
+    if (given_deformed && (opt.surface || given_map))
+      throw Error(ErrorKind::Usage, "--deformed takes a deformed tet mesh: not with --surface or --polycube-map");
+    const bool given_tets = given_map || given_deformed;  // the input's tets are kept as they are
     std::vector<int> tet_vertex_map;  // tet input: new index of every vertex of the file
     if (in.T.rows() > 0) {
       // Tet mesh input: checked, its boundary validated like a surface input.
@@ -227,7 +235,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // --tets, --max-size or --edge-length ask for another tet mesh: the input's boundary is
       // tetrahedralized again (a coarse input, e.g. tentacles one tet thick, cannot bend into a
       // polycube without inverting tets). Otherwise the input's tets are the tet mesh.
-      const bool retet = !given_map && !opt.surface &&
+      const bool retet = !given_tets && !opt.surface &&
                          (opt.tet.target_tets > 0 || opt.tet.max_size > 0 || opt.tet.edge_length > 0);
       if (retet) {
         report["input"]["tets_replaced"] = true;
@@ -316,8 +324,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj["gmsh_runs"] = stats.attempts;
       }
       // Tets with four boundary vertices would have to flatten on polycube faces: split them.
-      // (Not when a polycube map is given: its tets are those of the input.)
-      const int split = opt.surface || given_map ? 0 : split_boundary_tets(tm);
+      // (Not when a polycube map or a deformed mesh is given: its tets are those of the input.)
+      const int split = opt.surface || given_tets ? 0 : split_boundary_tets(tm);
       if (split > 0) {
         check_tet_mesh(tm, nullptr, "split tet mesh");
         const TetQuality sq = measure_tets(tm.V, tm.T);
@@ -491,31 +499,59 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                    std::to_string(opt.deform.target_quality));
       hooks.report("deform", 1);
     };
-    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && !given_map)
-      run_deform(opt.deform.barrier_weight);
-
-    // A polycube map given: the file's tets must be the input's, vertex for vertex.
-    auto read_given_map = [&] {
-      hooks.info("reading the polycube map " + opt.polycube_map);
-      const MeshData P = io::read_mesh(opt.polycube_map, opt.cad);
-      const std::string what = opt.polycube_map + ": a polycube map must have the tet mesh's vertices and tets (" +
+    // A polycube map or a deformed mesh given: the file's tets must be the input's, vertex for
+    // vertex. Returns its positions in the tet mesh's numbering.
+    auto read_same_tets = [&](const std::string& path, const std::string& kind) {
+      hooks.info("reading the " + kind + " " + path);
+      const MeshData P = io::read_mesh(path, opt.cad);
+      const std::string what = path + ": a " + kind + " must have the tet mesh's vertices and tets (" +
                                std::to_string(tet_vertex_map.size()) + " and " + std::to_string(in.T.rows()) +
                                " in " + (opt.input.empty() ? std::string("the input") : opt.input) + ")";
+      // (A run's polycube stage rewrites tetmesh.mesh when the realization split or collapsed edges,
+      // so that it matches polycube.mesh: deformed.mesh matches the tetmesh.mesh of --until deform.)
+      const std::string hint = kind == "deformed mesh" ? " (use the tetmesh.mesh of a --until deform run: the polycube "
+                                                         "stage rewrites it when the realization splits or collapses edges)"
+                                                       : "";
       if (P.V.rows() != static_cast<Eigen::Index>(tet_vertex_map.size()) || P.T.rows() != in.T.rows())
         throw Error(ErrorKind::InvalidMesh, what + ", it has " + std::to_string(P.V.rows()) + " vertices and " +
-                                                std::to_string(P.T.rows()) + " tets");
+                                                std::to_string(P.T.rows()) + " tets" + hint);
       for (int t = 0; t < P.T.rows(); ++t) {
         std::array<int, 4> a{P.T(t, 0), P.T(t, 1), P.T(t, 2), P.T(t, 3)}, b{in.T(t, 0), in.T(t, 1), in.T(t, 2), in.T(t, 3)};
         std::sort(a.begin(), a.end());
         std::sort(b.begin(), b.end());
         if (a != b)
-          throw Error(ErrorKind::InvalidMesh, what + "; its tet " + std::to_string(t) + " has other vertices");
+          throw Error(ErrorKind::InvalidMesh, what + "; its tet " + std::to_string(t) + " has other vertices" + hint);
       }
       MatX3d X(tm.V.rows(), 3);
       for (size_t i = 0; i < tet_vertex_map.size(); ++i)
         if (tet_vertex_map[i] >= 0) X.row(tet_vertex_map[i]) = P.V.row(static_cast<Eigen::Index>(i));
-      return chart::polycube_from_map(tm.V, tm.T, tm.boundary, X);
+      return X;
     };
+    auto read_given_map = [&] {
+      return chart::polycube_from_map(tm.V, tm.T, tm.boundary, read_same_tets(opt.polycube_map, "polycube map"));
+    };
+    if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && given_deformed) {
+      // The extraction starts from the given deformation: its figures are measured, nothing is written.
+      dr.X = read_same_tets(opt.deformed, "deformed mesh");
+      const TetQuality q = measure_tets(dr.X, tm.T);
+      if (q.inverted + q.zero_volume > 0)
+        throw Error(ErrorKind::InvalidMesh, opt.deformed + ": " + std::to_string(q.inverted + q.zero_volume) +
+                                                " tets are inverted or flat in the deformed mesh (e.g. tet " +
+                                                std::to_string(q.bad.empty() ? -1 : q.bad[0]) + ")");
+      double s1 = 0, s2 = 0;
+      for (int f = 0; f < tm.boundary.rows(); ++f) {
+        const Vec3 a = deform::area_normal(dr.X, tm.boundary(f, 0), tm.boundary(f, 1), tm.boundary(f, 2));
+        s1 += a.lpNorm<1>();
+        s2 += a.norm();
+      }
+      dr.l1_quality = s2 > 0 ? s1 / s2 - 1 : 0;
+      const deform::ArapRest ar = deform::ArapRest::build(tm.V, tm.T);
+      dr.arap = deform::arap_energy(dr.X, tm.T, ar, 1.0, nullptr, nullptr);
+      report["polycube"] = {{"source", opt.deformed}, {"l1_quality", dr.l1_quality}};  // its ARAP: deformed_arap_distortion
+      hooks.info("given deformation: l1_quality " + std::to_string(dr.l1_quality) + ", ARAP " + std::to_string(dr.arap));
+    } else if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && !given_map) {
+      run_deform(opt.deform.barrier_weight);
+    }
 
     // ---- polycube -----------------------------------------------------------------------
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Polycube)) {
@@ -686,7 +722,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::CellFields df;
       df["label"] = ex.labels;
       df["label"].resize(B.rows() + tm.T.rows(), -1);
-      if (!given_map) write_deformed_vtk(df);
+      if (!given_map && !given_deformed) write_deformed_vtk(df);
       {
         const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
         io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);

@@ -63,6 +63,11 @@ struct PipelineOptions {
   /// tetmesh.mesh, or another tool's polycube tet mesh) whose boundary is an axis-aligned polycube.
   /// The input must then be the tet mesh. Empty: off.
   std::string polycube_map;
+  /// A deformed tet mesh to extract the polycube from instead of deforming: a tet mesh file with
+  /// the input's tets (e.g. an earlier run's deformed.mesh for its tetmesh.mesh), in the frame the
+  /// deformation left it (axis-aligned charts). The input must then be the tet mesh; the
+  /// extraction's options may differ from the earlier run's. Empty: off.
+  std::string deformed;
   hex::HexOptions hex;
   /// Quad stage: approximate quad count (0 = the hex stage's resolution; in surface mode 2000) and smoothing.
   int target_quads = 0;
