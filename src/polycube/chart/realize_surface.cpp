@@ -262,12 +262,12 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
   // misoriented triangles (within two rings, found again every sweep). A handful of folds near
   // chart borders is what the starts leave; the global rounds below cost a linear solve per
   // L-BFGS iteration over the whole surface for them. Returns the fewest misoriented triangles
-  // reached (X holds that state).
+  // reached (X holds that state); initial: the count at the call.
   std::vector<std::vector<int>> vf(n);
   for (int f = 0; f < F.rows(); ++f)
     for (int j = 0; j < 3; ++j) vf[F(f, j)].push_back(f);
   auto untangle_locally = [&](MatX3d& X, const std::vector<Eigen::Matrix2d>& Dm_inv, double scale, double theta,
-                              int& sweeps) {
+                              int& initial, int& sweeps) {
     // The layout of triangle f with vertex v at p (2D, mirrored for negative labels).
     auto layout = [&](int f, int v, const Vec3& p, Eigen::Vector2d q[3], int& corner) {
       const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
@@ -303,7 +303,7 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       untangle_triangle(q, Dm_inv[f], scale, 1.0, 1.0, theta, D, nullptr);
       return D;
     };
-    const int initial = misoriented(X);
+    initial = misoriented(X);
     int best = initial, since_best = 0;
     MatX3d X_best = X;
     std::vector<char> in(n, 0);
@@ -408,9 +408,8 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     const double scale = std::sqrt(poly_area / std::max(rest_area, 1e-300));
     const double theta = 1.0 / 128;
     if (opt.local_first >= 0) {
-      const int before = misoriented(X);
-      int sweeps = 0;
-      const int m = untangle_locally(X, Dm_inv, scale, theta, sweeps);
+      int before = 0, sweeps = 0;
+      const int m = untangle_locally(X, Dm_inv, scale, theta, before, sweeps);
       hooks.debug("surface local untangling: " + std::to_string(before) + " -> " + std::to_string(m) +
                   " misoriented triangles in " + std::to_string(sweeps) + " sweeps");
       if (m <= opt.local_first) return;

@@ -539,11 +539,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                                 " tets are inverted or flat in the deformed mesh (e.g. tet " +
                                                 std::to_string(q.bad.empty() ? -1 : q.bad[0]) + ")");
       double s1 = 0, s2 = 0;
-      for (int f = 0; f < tm.boundary.rows(); ++f) {
-        const Vec3 a = deform::area_normal(dr.X, tm.boundary(f, 0), tm.boundary(f, 1), tm.boundary(f, 2));
-        s1 += a.lpNorm<1>();
-        s2 += a.norm();
-      }
+      deform::l1_measure(dr.X, tm.boundary, s1, s2);
       dr.l1_quality = s2 > 0 ? s1 / s2 - 1 : 0;
       const deform::ArapRest ar = deform::ArapRest::build(tm.V, tm.T);
       dr.arap = deform::arap_energy(dr.X, tm.T, ar, 1.0, nullptr, nullptr);
