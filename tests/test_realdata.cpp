@@ -304,8 +304,10 @@ TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
 
 // fandisk at Table I's count with the default realization (local untangling first, 2026-11-27):
 // its polycube realizes in under a second (25 s with the global rounds), ARAP 0.0373, but the
-// crease captures near the bend at (3, 15.5, -1) are all refused, and the Hausdorff distance is
-// 8.06e-3 (Table I: 3.82e-3; 3.88e-3 with the global rounds' layout).
+// Hausdorff distance is 6.64e-3 (Table I: 3.82e-3; 3.88e-3 with the global rounds' layout), set
+// in the thin wedge between two sharp edges meeting at (2.79, 15.47, -1.16). Two crease runs near
+// it are kept since the whole-mesh check compares the finished meshes (8.06e-3 when it compared
+// the input's vertices before the fitting and refused them, 2026-11-27).
 TEST(RealSurfaceQuadsCreases, FandiskQuadsWithTheDefaultRealization) {
   const std::string path = shared_dir() + "/meshes/cad/fandisk.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
@@ -323,7 +325,8 @@ TEST(RealSurfaceQuadsCreases, FandiskQuadsWithTheDefaultRealization) {
   EXPECT_EQ(q["inverted"], 0);
   EXPECT_GT(q["sj_min"].get<double>(), 0.239) << q.dump();
   EXPECT_GT(q["sj_mean"].get<double>(), 0.620) << q.dump();
-  EXPECT_LT(q["hausdorff_rel"].get<double>(), 9e-3) << q.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 7e-3) << q.dump();
+  EXPECT_GE(q["creases"]["captured"].get<int>(), 1) << q.dump();
 }
 
 // organic/spot in surface mode: the surface ARAP lets thin parts fold flat (its horns pressed into

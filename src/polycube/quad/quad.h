@@ -66,8 +66,10 @@ struct QuadResult {
   int crease_runs = 0;           ///< runs of sharp edges no quad edge followed after the extraction
   int crease_captured = 0;       ///< of those, runs a path of quad edges was moved onto
   int crease_moved = 0;          ///< vertices moved onto sharp edges
-  geometry::CreaseCoverage creases_before;  ///< how quad edges follow the sharp edges without the capture
-  geometry::CreaseCoverage creases_after;   ///< and with it
+  /// How quad edges follow the sharp edges after the smoothing, without the capture; and in the
+  /// final mesh (after the capture, the pattern search and the fitting to the surface).
+  geometry::CreaseCoverage creases_before;
+  geometry::CreaseCoverage creases_after;
   double seconds = 0;
   // Surface mode (quad_mesh_from_surface_polycube):
   double cells_per_unit = 0;              ///< grid cells per length unit of the polycube
