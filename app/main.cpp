@@ -194,6 +194,10 @@ int main(int argc, char** argv) {
                  "Polycube realization: elliptic untangling rounds in a row without fewer inverted tets before it "
                  "gives up (the edge collapses and relabellings take over)")
       ->capture_default_str()->check(CLI::Range(1, 1000));
+  app.add_option("--relax", rz.relax_iterations,
+                 "Surface mode: after the realization's ARAP, N L-BFGS iterations on the map's elliptic energy "
+                 "(shape and area distortion, a barrier against crushed triangles; 0 = off)")
+      ->capture_default_str()->check(CLI::Range(0, 1000000));
   app.add_option("--local-first", rz.local_first,
                  "Polycube realization: after landing on the planes (or the relaxation of Eq. 17), the local "
                  "untangling runs first; when it leaves at most N tets inverted the elliptic untangling is "

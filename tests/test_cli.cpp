@@ -283,6 +283,16 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(run_cli("--example box_hole --until polycube --realize-start penalties -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --untangle-patience 0 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
+  // Surface mode's relaxation: reported, and the map's worst isometric distortion no higher.
+  r = run_cli("--example box_hole --surface --until polycube -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const double plain = report(out)["polycube"]["isometric_distortion"]["max"].get<double>();
+  r = run_cli("--example box_hole --surface --until polycube --relax 300 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(out);
+  EXPECT_EQ(j["polycube"]["realize_options"]["relax_iterations"].get<int>(), 300);
+  EXPECT_LE(j["polycube"]["isometric_distortion"]["max"].get<double>(), plain);
+  EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --relax -1 -q -o " + out).code, 2);
 }
 
 TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {

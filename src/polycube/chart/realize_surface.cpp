@@ -257,56 +257,123 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     yy = y;
     return X;
   };
-  // Local untangling: Gauss-Seidel sweeps of Newton steps, one vertex at a time over its free
-  // coordinates (those no plane holds), on the elliptic energy of its triangles, around the
-  // misoriented triangles (within two rings, found again every sweep). A handful of folds near
-  // chart borders is what the starts leave; the global rounds below cost a linear solve per
-  // L-BFGS iteration over the whole surface for them. Returns the fewest misoriented triangles
-  // reached (X holds that state); initial: the count at the call.
   std::vector<std::vector<int>> vf(n);
   for (int f = 0; f < F.rows(); ++f)
     for (int j = 0; j < 3; ++j) vf[F(f, j)].push_back(f);
-  auto untangle_locally = [&](MatX3d& X, const std::vector<Eigen::Matrix2d>& Dm_inv, double scale, double theta,
-                              int& initial, int& sweeps) {
-    // The layout of triangle f with vertex v at p (2D, mirrored for negative labels).
-    auto layout = [&](int f, int v, const Vec3& p, Eigen::Vector2d q[3], int& corner) {
+  // The elliptic energy of the triangles around vertex v with v at p (the others at X), each laid
+  // out in its chart's plane (mirrored for negative labels), and its gradient in 3D coordinates.
+  struct Elliptic {
+    std::vector<Eigen::Matrix2d> Dm_inv;
+    double scale = 1, theta = 1.0 / 128;
+  };
+  auto star = [&](const MatX3d& X, const Elliptic& el, int v, const Vec3& p, double eps, Vec3* g) {
+    double E = 0;
+    if (g) g->setZero();
+    for (int f : vf[v]) {
       const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
       const double sg = labels[f] % 2 ? -1.0 : 1.0;
+      Eigen::Vector2d q[3], gq[3];
+      int corner = 0;
       for (int j = 0; j < 3; ++j) {
         const int u = F(f, j);
         if (u == v) corner = j;
         const Vec3 x = u == v ? p : Vec3(X.row(u).transpose());
         q[j] = Eigen::Vector2d(sg * x[a], x[b]);
       }
-    };
-    auto star = [&](int v, const Vec3& p, double eps, Vec3* g) {
-      double E = 0;
-      if (g) g->setZero();
-      for (int f : vf[v]) {
-        Eigen::Vector2d q[3], gq[3];
-        int j = 0;
-        layout(f, v, p, q, j);
-        double D;
-        E += untangle_triangle(q, Dm_inv[f], scale, ar.w[f], eps, theta, D, g ? gq : nullptr);
-        if (!g) continue;
-        const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
-        (*g)[a] += (labels[f] % 2 ? -1.0 : 1.0) * gq[j][0];
-        (*g)[b] += gq[j][1];
-      }
-      return E;
-    };
-    auto det_of = [&](int f) {
-      Eigen::Vector2d q[3];
-      int j = 0;
-      layout(f, -1, Vec3::Zero(), q, j);
       double D;
-      untangle_triangle(q, Dm_inv[f], scale, 1.0, 1.0, theta, D, nullptr);
-      return D;
-    };
+      E += untangle_triangle(q, el.Dm_inv[f], el.scale, ar.w[f], eps, el.theta, D, g ? gq : nullptr);
+      if (!g) continue;
+      (*g)[a] += sg * gq[corner][0];
+      (*g)[b] += gq[corner][1];
+    }
+    return E;
+  };
+  // The Jacobian determinant of triangle f's map (rest -> its chart's plane, scaled), and its
+  // elliptic energy without the weight (2 for a rotation).
+  auto triangle_det = [&](const MatX3d& X, const Elliptic& el, int f, double eps, double* energy) {
+    const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+    const double sg = labels[f] % 2 ? -1.0 : 1.0;
+    Eigen::Vector2d q[3];
+    for (int j = 0; j < 3; ++j) q[j] = Eigen::Vector2d(sg * X(F(f, j), a), X(F(f, j), b));
+    double D;
+    const double E = untangle_triangle(q, el.Dm_inv[f], el.scale, 1.0, eps, el.theta, D, nullptr);
+    if (energy) *energy = E;
+    return D;
+  };
+  // One Newton step of vertex v over its free coordinates (those no plane holds) on the elliptic
+  // energy of its triangles: Hessian by central differences of the gradient, its eigenvalues
+  // made positive, a backtracking line search (Armijo) from at most half the mean edge length.
+  auto newton_vertex = [&](MatX3d& X, const Elliptic& el, int v, double eps) {
+    int free_axes[3], nf = 0;
+    for (int k = 0; k < 3; ++k)
+      if (var[k][v] >= r.planes[k]) free_axes[nf++] = k;
+    if (nf == 0 || vf[v].empty()) return false;
+    const Vec3 p0 = X.row(v).transpose();
+    double len = 0;
+    for (int f : vf[v]) len += (X.row(F(f, 0)) - X.row(F(f, 1))).norm();
+    len /= static_cast<double>(vf[v].size());
+    if (!(len > 0)) return false;
+    Vec3 g3;
+    const double E0 = star(X, el, v, p0, eps, &g3);
+    const double h = 1e-6 * len;
+    Eigen::Vector2d gf;
+    Eigen::Matrix2d H = Eigen::Matrix2d::Identity();
+    for (int c = 0; c < nf; ++c) {
+      gf[c] = g3[free_axes[c]];
+      Vec3 pp = p0, pm = p0, gp, gm;
+      pp[free_axes[c]] += h;
+      pm[free_axes[c]] -= h;
+      star(X, el, v, pp, eps, &gp);
+      star(X, el, v, pm, eps, &gm);
+      for (int a = 0; a < nf; ++a) H(a, c) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * h);
+    }
+    const Eigen::MatrixXd Hs = 0.5 * (H.topLeftCorner(nf, nf) + H.topLeftCorner(nf, nf).transpose());
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hs);
+    Eigen::VectorXd ev = es.eigenvalues();
+    const double floor = 1e-8 * std::max(ev.cwiseAbs().maxCoeff(), 1e-300);
+    for (int a = 0; a < nf; ++a) ev[a] = std::max(std::abs(ev[a]), floor);
+    const Eigen::VectorXd gv = gf.head(nf);
+    const Eigen::VectorXd df = -es.eigenvectors() * (es.eigenvectors().transpose() * gv).cwiseQuotient(ev);
+    const double slope = df.dot(gv);
+    if (!(slope < 0)) return false;
+    Vec3 d = Vec3::Zero();
+    for (int a = 0; a < nf; ++a) d[free_axes[a]] = df[a];
+    double step = d.norm() > 0.5 * len ? 0.5 * len / d.norm() : 1.0;
+    for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
+      const Vec3 p = p0 + step * d;
+      if (star(X, el, v, p, eps, nullptr) <= E0 + 1e-4 * step * slope) {
+        X.row(v) = p.transpose();
+        return true;
+      }
+    }
+    return false;
+  };
+  // Vertices of the triangles marked in `seed`, and those within `rings` rings of them.
+  auto grow_region = [&](const std::vector<char>& seed, int rings) {
+    std::vector<char> in(n, 0);
+    std::vector<int> region;
+    for (int f = 0; f < F.rows(); ++f)
+      if (seed[f])
+        for (int j = 0; j < 3; ++j)
+          if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
+    for (int ring = 0; ring < rings; ++ring) {
+      const size_t m = region.size();
+      for (size_t i = 0; i < m; ++i)
+        for (int f : vf[region[i]])
+          for (int j = 0; j < 3; ++j)
+            if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
+    }
+    return region;
+  };
+  // Local untangling: Gauss-Seidel sweeps of Newton steps (newton_vertex) around the misoriented
+  // triangles (within two rings, found again every sweep). A handful of folds near chart borders
+  // is what the starts leave; the global rounds below cost a linear solve per L-BFGS iteration
+  // over the whole surface for them. Returns the fewest misoriented triangles reached (X holds
+  // that state); initial: the count at the call.
+  auto untangle_locally = [&](MatX3d& X, const Elliptic& el, int& initial, int& sweeps) {
     initial = misoriented(X);
     int best = initial, since_best = 0;
     MatX3d X_best = X;
-    std::vector<char> in(n, 0);
     int sweep = 0;
     // At most 100 sweeps, 10 without fewer folds; and after 10 sweeps, over half the folds left
     // (and more than the global rounds are skipped for) means the layout needs the global rounds:
@@ -314,69 +381,15 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     // where bumpy torus went 385 -> 1 in 13 sweeps).
     for (; sweep < 100 && best > 0 && since_best < 10 && !(sweep == 10 && best > opt.local_first && 2 * best > initial);
          ++sweep) {
-      std::vector<int> region;
-      std::fill(in.begin(), in.end(), 0);
-      for (int f = 0; f < F.rows(); ++f)
-        if (!faces_label(X, F(f, 0), F(f, 1), F(f, 2), labels[f], diag0))
-          for (int j = 0; j < 3; ++j)
-            if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
-      for (int ring = 0; ring < 2; ++ring) {
-        const size_t m = region.size();
-        for (size_t i = 0; i < m; ++i)
-          for (int f : vf[region[i]])
-            for (int j = 0; j < 3; ++j)
-              if (!in[F(f, j)]) in[F(f, j)] = 1, region.push_back(F(f, j));
-      }
+      std::vector<char> folded(F.rows(), 0);
+      for (int f = 0; f < F.rows(); ++f) folded[f] = !faces_label(X, F(f, 0), F(f, 1), F(f, 2), labels[f], diag0);
+      const std::vector<int> region = grow_region(folded, 2);
       double dmin = std::numeric_limits<double>::infinity();
       for (int v : region)
-        for (int f : vf[v]) dmin = std::min(dmin, det_of(f));
+        for (int f : vf[v]) dmin = std::min(dmin, triangle_det(X, el, f, 1.0, nullptr));
       const double eps = dmin < 0 ? std::max(1e-12, 0.1 * -dmin) : 1e-8;
       for (int inner = 0; inner < 10; ++inner)
-        for (int v : region) {
-          int free_axes[3], nf = 0;
-          for (int k = 0; k < 3; ++k)
-            if (var[k][v] >= r.planes[k]) free_axes[nf++] = k;
-          if (nf == 0 || vf[v].empty()) continue;
-          const Vec3 p0 = X.row(v).transpose();
-          double len = 0;
-          for (int f : vf[v]) len += (X.row(F(f, 0)) - X.row(F(f, 1))).norm();
-          len /= static_cast<double>(vf[v].size());
-          if (!(len > 0)) continue;
-          Vec3 g3;
-          const double E0 = star(v, p0, eps, &g3);
-          // Hessian over the free coordinates: central differences of the gradient.
-          const double h = 1e-6 * len;
-          Eigen::Vector2d gf;
-          Eigen::Matrix2d H = Eigen::Matrix2d::Identity();
-          for (int c = 0; c < nf; ++c) {
-            gf[c] = g3[free_axes[c]];
-            Vec3 pp = p0, pm = p0, gp, gm;
-            pp[free_axes[c]] += h;
-            pm[free_axes[c]] -= h;
-            star(v, pp, eps, &gp);
-            star(v, pm, eps, &gm);
-            for (int a = 0; a < nf; ++a) H(a, c) = (gp[free_axes[a]] - gm[free_axes[a]]) / (2 * h);
-          }
-          const Eigen::MatrixXd Hs = 0.5 * (H.topLeftCorner(nf, nf) + H.topLeftCorner(nf, nf).transpose());
-          Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Hs);
-          Eigen::VectorXd ev = es.eigenvalues();
-          const double floor = 1e-8 * std::max(ev.cwiseAbs().maxCoeff(), 1e-300);
-          for (int a = 0; a < nf; ++a) ev[a] = std::max(std::abs(ev[a]), floor);
-          const Eigen::VectorXd gv = gf.head(nf);
-          const Eigen::VectorXd df = -es.eigenvectors() * (es.eigenvectors().transpose() * gv).cwiseQuotient(ev);
-          const double slope = df.dot(gv);
-          if (!(slope < 0)) continue;
-          Vec3 d = Vec3::Zero();
-          for (int a = 0; a < nf; ++a) d[free_axes[a]] = df[a];
-          double step = d.norm() > 0.5 * len ? 0.5 * len / d.norm() : 1.0;
-          for (int ls = 0; ls < 30; ++ls, step *= 0.5) {
-            const Vec3 p = p0 + step * d;
-            if (star(v, p, eps, nullptr) <= E0 + 1e-4 * step * slope) {
-              X.row(v) = p.transpose();
-              break;
-            }
-          }
-        }
+        for (int v : region) newton_vertex(X, el, v, eps);
       const int m = misoriented(X);
       if (m < best) best = m, since_best = 0, X_best = X;
       else ++since_best;
@@ -385,15 +398,11 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     sweeps = sweep;
     return best;
   };
-  auto untangle = [&](MatX3d& X) {
-    if (misoriented(X) == 0) return;
-    // Elliptic untangling (Garanzha et al. 2021, 2D) of the chart layouts: every triangle in its
-    // chart's plane, mirrored for negative labels so that facing its label = positive area; plane
-    // heights fixed, the other unknowns free; L-BFGS preconditioned by the ARAP factorizations,
-    // eps decreasing by the paper's rule.
-    std::array<int, 4> off{0, 0, 0, 0};
-    for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + nvar[k];
-    std::vector<Eigen::Matrix2d> Dm_inv(F.rows());
+  // The rest shapes of the triangles for the elliptic energy, and the scale that makes the
+  // polycube's total area the rest's.
+  auto elliptic_rest = [&](const MatX3d& X) {
+    Elliptic el;
+    el.Dm_inv.resize(F.rows());
     double rest_area = 0, poly_area = 0;
     for (int f = 0; f < F.rows(); ++f) {
       const Vec3 e1 = (rest.row(F(f, 1)) - rest.row(F(f, 0))).transpose();
@@ -401,67 +410,84 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       const double l1 = e1.norm(), a2 = e1.cross(e2).norm();
       Eigen::Matrix2d Dm;
       Dm << l1, e2.dot(e1) / std::max(l1, 1e-300), 0, a2 / std::max(l1, 1e-300);
-      Dm_inv[f] = a2 > 0 ? Eigen::Matrix2d(Dm.inverse()) : Eigen::Matrix2d::Identity();
+      el.Dm_inv[f] = a2 > 0 ? Eigen::Matrix2d(Dm.inverse()) : Eigen::Matrix2d::Identity();
       rest_area += 0.5 * a2;
       poly_area += std::abs(deform::area_normal(X, F(f, 0), F(f, 1), F(f, 2)).dot(label_direction(labels[f])));
     }
-    const double scale = std::sqrt(poly_area / std::max(rest_area, 1e-300));
-    const double theta = 1.0 / 128;
+    el.scale = std::sqrt(poly_area / std::max(rest_area, 1e-300));
+    return el;
+  };
+  // The elliptic energy over the unknowns z (per axis: the plane heights, then the free
+  // coordinates; plane heights fixed, the gradient zero there), its minimum determinant, and the
+  // ARAP factorizations as the preconditioner.
+  std::array<int, 4> off{0, 0, 0, 0};
+  for (int k = 0; k < 3; ++k) off[k + 1] = off[k] + nvar[k];
+  auto to_z = [&](const MatX3d& X) {
+    Eigen::VectorXd z(off[3]);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k) z[off[k] + var[k][v]] = X(v, k);
+    return z;
+  };
+  auto to_X = [&](const Eigen::VectorXd& zz) {
+    MatX3d Y(n, 3);
+    for (int v = 0; v < n; ++v)
+      for (int k = 0; k < 3; ++k) Y(v, k) = zz[off[k] + var[k][v]];
+    return Y;
+  };
+  double min_det = 0;
+  auto energy = [&](const Elliptic& el, const Eigen::VectorXd& zz, double eps, Eigen::VectorXd* g) {
+    if (g) g->setZero(zz.size());
+    double E = 0;
+    min_det = std::numeric_limits<double>::infinity();
+    for (int f = 0; f < F.rows(); ++f) {
+      const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
+      const double sg = labels[f] % 2 ? -1.0 : 1.0;
+      Eigen::Vector2d q[3];
+      for (int j = 0; j < 3; ++j)
+        q[j] = Eigen::Vector2d(sg * zz[off[a] + var[a][F(f, j)]], zz[off[b] + var[b][F(f, j)]]);
+      double D;
+      Eigen::Vector2d gq[3];
+      E += untangle_triangle(q, el.Dm_inv[f], el.scale, ar.w[f], eps, el.theta, D, g ? gq : nullptr);
+      min_det = std::min(min_det, D);
+      if (!g) continue;
+      for (int j = 0; j < 3; ++j) {
+        const int ia = off[a] + var[a][F(f, j)], ib = off[b] + var[b][F(f, j)];
+        if (var[a][F(f, j)] >= r.planes[a]) (*g)[ia] += sg * gq[j][0];
+        if (var[b][F(f, j)] >= r.planes[b]) (*g)[ib] += gq[j][1];
+      }
+    }
+    return E;
+  };
+  auto precondition = [&](const Eigen::VectorXd& g) {
+    Eigen::VectorXd d(g.size());
+    for (int k = 0; k < 3; ++k) {
+      d.segment(off[k], nvar[k]) = solver[k].solve(g.segment(off[k], nvar[k]));
+      d.segment(off[k], r.planes[k]).setZero();
+    }
+    return d;
+  };
+  auto untangle = [&](MatX3d& X) {
+    if (misoriented(X) == 0) return;
+    // Elliptic untangling (Garanzha et al. 2021, 2D) of the chart layouts: every triangle in its
+    // chart's plane, mirrored for negative labels so that facing its label = positive area; plane
+    // heights fixed, the other unknowns free; L-BFGS preconditioned by the ARAP factorizations,
+    // eps decreasing by the paper's rule.
+    const Elliptic el = elliptic_rest(X);
     if (opt.local_first >= 0) {
       int before = 0, sweeps = 0;
-      const int m = untangle_locally(X, Dm_inv, scale, theta, before, sweeps);
+      const int m = untangle_locally(X, el, before, sweeps);
       hooks.debug("surface local untangling: " + std::to_string(before) + " -> " + std::to_string(m) +
                   " misoriented triangles in " + std::to_string(sweeps) + " sweeps");
       if (m <= opt.local_first) return;
     }
     // Unknowns from X (each variable's value is shared by its vertices).
-    Eigen::VectorXd z(off[3]);
-    for (int v = 0; v < n; ++v)
-      for (int k = 0; k < 3; ++k) z[off[k] + var[k][v]] = X(v, k);
-    double min_det = 0;
-    auto energy = [&](const Eigen::VectorXd& zz, double eps, Eigen::VectorXd* g) {
-      if (g) g->setZero(zz.size());
-      double E = 0;
-      min_det = std::numeric_limits<double>::infinity();
-      for (int f = 0; f < F.rows(); ++f) {
-        const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
-        const double sg = labels[f] % 2 ? -1.0 : 1.0;
-        Eigen::Vector2d q[3];
-        for (int j = 0; j < 3; ++j)
-          q[j] = Eigen::Vector2d(sg * zz[off[a] + var[a][F(f, j)]], zz[off[b] + var[b][F(f, j)]]);
-        double D;
-        Eigen::Vector2d gq[3];
-        E += untangle_triangle(q, Dm_inv[f], scale, ar.w[f], eps, theta, D, g ? gq : nullptr);
-        min_det = std::min(min_det, D);
-        if (!g) continue;
-        for (int j = 0; j < 3; ++j) {
-          const int ia = off[a] + var[a][F(f, j)], ib = off[b] + var[b][F(f, j)];
-          if (var[a][F(f, j)] >= r.planes[a]) (*g)[ia] += sg * gq[j][0];
-          if (var[b][F(f, j)] >= r.planes[b]) (*g)[ib] += gq[j][1];
-        }
-      }
-      return E;
-    };
-    auto precondition = [&](const Eigen::VectorXd& g) {
-      Eigen::VectorXd d(g.size());
-      for (int k = 0; k < 3; ++k) {
-        d.segment(off[k], nvar[k]) = solver[k].solve(g.segment(off[k], nvar[k]));
-        d.segment(off[k], r.planes[k]).setZero();
-      }
-      return d;
-    };
-    auto to_X = [&](const Eigen::VectorXd& zz) {
-      MatX3d Y(n, 3);
-      for (int v = 0; v < n; ++v)
-        for (int k = 0; k < 3; ++k) Y(v, k) = zz[off[k] + var[k][v]];
-      return Y;
-    };
+    Eigen::VectorXd z = to_z(X);
     double eps = 1.0;
     if (start) {
       // A given start is a layout with a few folds at most (e.g. after edge collapses): eps of the
       // order of its worst determinant keeps the rest in the barrier regime, so the untangling
       // stays local (eps = 1 rearranges whole charts: fandisk 0 -> 9 folds in one round).
-      energy(z, eps, nullptr);
+      energy(el, z, eps, nullptr);
       eps = std::clamp(4 * std::abs(std::min(min_det, 0.0)), 1e-3, 1.0);
     }
     int best = misoriented(X), since_best = 0, total = 0;
@@ -469,13 +495,13 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     // At most 30 rounds, and 5 without fewer folds (on fandisk, eight and rocker the fewest came by
     // round 6, the count then oscillating).
     for (int round = 0; round < 30 && best > 0 && since_best < 5; ++round) {
-      const double E0 = energy(z, eps, nullptr);
+      const double E0 = energy(el, z, eps, nullptr);
       double E = E0;
       LbfgsOptions lo;
       lo.max_iterations = 300;
       total += lbfgs_minimize(
-          z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* gg) { return energy(zz, eps, gg); }, precondition, lo, E);
-      energy(z, eps, nullptr);
+          z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* gg) { return energy(el, zz, eps, gg); }, precondition, lo, E);
+      energy(el, z, eps, nullptr);
       const int m = misoriented(to_X(z));
       hooks.debug("surface untangling round " + std::to_string(round) + ": eps " + std::to_string(eps) +
                   ", min det " + std::to_string(min_det) + ", " + std::to_string(m) + " misoriented");
@@ -571,6 +597,31 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     MatX3d X2 = positions();
     const int bad2 = finish(X2, "surface_harmonic");
     if (bad2 < bad) X = std::move(X2), bad = bad2;
+  }
+  if (bad == 0 && opt.relax_iterations > 0) {
+    // Relaxation (RealizeOptions::relax_iterations): L-BFGS on the elliptic energy with equal shape
+    // and area weights (2 per triangle at a rotation) over the free coordinates, the plane heights
+    // kept; eps far below any determinant makes it a barrier against folding.
+    Elliptic el = elliptic_rest(X);
+    el.theta = 0.5;
+    const double eps = 1e-12;
+    const MatX3d X0 = X;
+    Eigen::VectorXd z = to_z(X);
+    LbfgsOptions lo;
+    lo.max_iterations = opt.relax_iterations;
+    lo.max_change = 0.1 * diag0 / std::sqrt(static_cast<double>(n));
+    double E = energy(el, z, eps, nullptr);
+    const double E0 = E;
+    const int its = lbfgs_minimize(
+        z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* gg) { return energy(el, zz, eps, gg); }, precondition, lo, E);
+    X = to_X(z);
+    const int folded = misoriented(X);
+    hooks.debug("surface relaxation: " + std::to_string(its) + " iterations, elliptic energy " + std::to_string(E0) +
+                " -> " + std::to_string(E) + ", max isometric distortion " +
+                std::to_string(isometric_distortion_surface(rest, X0, F).max) + " -> " +
+                std::to_string(isometric_distortion_surface(rest, X, F).max) +
+                (folded > 0 ? ", " + std::to_string(folded) + " misoriented: undone" : ""));
+    if (folded > 0) X = X0;
   }
   const double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);
 

@@ -597,6 +597,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                {"eq17_budget", opt.polycube.realize.eq17_budget},
                                {"untangle_patience", opt.polycube.realize.untangle_patience},
                                {"local_first", opt.polycube.realize.local_first},
+                               {"relax_iterations", opt.polycube.realize.relax_iterations},
                                {"continuation_retries", opt.polycube.realize.continuation_retries},
                                {"penalty_path", opt.polycube.realize.penalty_path}};
       if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
