@@ -293,6 +293,9 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(j["polycube"]["realize_options"]["relax_iterations"].get<int>(), 300);
   EXPECT_LE(j["polycube"]["isometric_distortion"]["max"].get<double>(), plain);
   EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --relax -1 -q -o " + out).code, 2);
+  r = run_cli("--example box_hole --until polycube --relax 10 -q -o " + out);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.output.find("--relax"), std::string::npos) << r.output;
 }
 
 TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {

@@ -185,6 +185,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     report["mode"] = opt.surface ? "surface" : "volume";
     if (opt.surface && opt.until == Stage::Hex)
       throw Error(ErrorKind::Usage, "hex meshes need the volume: drop --surface (surface mode builds quads)");
+    if (!opt.surface && opt.polycube.realize.relax_iterations > 0)
+      throw Error(ErrorKind::Usage, "--relax relaxes the surface polycube map: it needs --surface");
     if (!opt.example.empty()) report["input"]["example"] = opt.example;
     if (in.T.rows() > 0 && in.H.rows() > 0)
       throw Error(ErrorKind::InvalidMesh, in.path + ": mixed tetrahedral and hexahedral meshes are not supported");
