@@ -246,8 +246,9 @@ int main(int argc, char** argv) {
                  "scaled Jacobian wins)")
       ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
   app.add_option("--thin-steps", hx.merge_thin_steps,
-                 "Hex mesh: planes of a step closer than this many cells share one integer (the step's riser "
-                 "vanishes instead of getting a layer of flat hexes); 0 = every step keeps a cell")
+                 "Hex mesh and surface-mode quads: planes of a step closer than this many cells share one integer "
+                 "(the step's riser vanishes instead of getting a layer of flat hexes or a row of sliver quads); "
+                 "0 = every step keeps a cell")
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
@@ -301,6 +302,7 @@ int main(int argc, char** argv) {
   if (plain_hessian) opt.deform.lagrangian_hessian = false;
   if (no_creases) opt.quad.capture_creases = false;
   opt.quad.sharp_angle_deg = hx.sharp_angle_deg;
+  opt.quad.merge_thin_steps = hx.merge_thin_steps;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
   hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size

@@ -432,6 +432,10 @@ TEST(Cli, MeasureGivesTheHexStageFigures) {
   for (const char* k : {"count", "inverted", "below_0_5"}) EXPECT_EQ(m["hex"][k], j["hex"][k]) << k;
   for (const char* k : {"sj_min", "sj_mean", "sj_max", "hausdorff_rel"})
     EXPECT_NEAR(m["hex"][k].get<double>(), j["hex"][k].get<double>(), 1e-12) << k;
+  // The edge ratio too (the VTK file's coordinates round the figures a little).
+  EXPECT_EQ(m["hex"]["edge_ratio"]["above_10"], j["hex"]["edge_ratio"]["above_10"]);
+  EXPECT_NEAR(m["hex"]["edge_ratio"]["max"].get<double>(), j["hex"]["edge_ratio"]["max"].get<double>(), 1e-6);
+  EXPECT_GE(j["hex"]["edge_ratio"]["max"].get<double>(), 1.0);
   // Not a hex mesh, or no file: clear errors.
   r = run_cli("measure " + out + "/surface.mesh");
   EXPECT_EQ(r.code, 4);

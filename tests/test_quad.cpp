@@ -56,6 +56,34 @@ TEST(Quad, ScaledJacobianKnownValues) {
   EXPECT_LT(quad::scaled_jacobian(dart), 0.0);
 }
 
+TEST(Quad, EdgeRatioSeesSliversTheScaledJacobianDoesNot) {
+  // Verdict's edge ratio: longest over shortest edge. A 1 x 0.005 rectangle has scaled Jacobian 1
+  // and edge ratio 200; a quad with a zero-length edge, 1e30. Hexes likewise over their 12 edges.
+  MatX3d V(9, 3);
+  V << 0, 0, 0, 1, 0, 0, 1, 0.005, 0, 0, 0.005, 0,  // sliver
+      0, 1, 0, 1, 1, 0, 1, 2, 0, 0, 2, 0,            // unit square (with 4: a zero edge below)
+      0, 1, 0;
+  MatX4i Q(3, 4);
+  Q << 0, 1, 2, 3, 4, 5, 6, 7, 4, 8, 6, 7;
+  const quad::QuadQuality q = quad::quad_quality(V, Q);
+  EXPECT_NEAR(q.per_element[0], 1.0, 1e-12);
+  EXPECT_NEAR(q.edge_ratio_max, 1e30, 1);
+  EXPECT_EQ(q.edge_ratio_above_10, 2);
+  EXPECT_EQ(q.edge_ratio_above_100, 2);
+  EXPECT_NEAR(q.edge_ratio_mean, (200.0 + 1.0) / 2, 1e-9);  // the zero-edge quad left out
+  const double lengths[4] = {1, 0.005, 1, 0.005};
+  EXPECT_NEAR(hex::edge_ratio(lengths, 4), 200, 1e-9);
+  // A 1 x 1 x 0.001 box: scaled Jacobian 1, edge ratio 1000.
+  MatX3d HV(8, 3);
+  HV << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 0.001, 1, 0, 0.001, 1, 1, 0.001, 0, 1, 0.001;
+  MatX8i H(1, 8);
+  H << 0, 1, 2, 3, 4, 5, 6, 7;
+  const hex::HexQuality h = hex::hex_quality(HV, H);
+  EXPECT_NEAR(h.sj_min, 1.0, 1e-12);
+  EXPECT_NEAR(h.edge_ratio_max, 1000, 1e-6);
+  EXPECT_EQ(h.edge_ratio_above_100, 1);
+}
+
 TEST(Quad, BoxGivesARegularQuadMeshWithEightIrregularVertices) {
   // 1 x 2 x 3 box at 4 cells per unit: 2 (4*8 + 8*12 + 4*12) = 352 squares, every scaled Jacobian
   // 1, valence 3 only at the 8 corners, closed, facing outward.

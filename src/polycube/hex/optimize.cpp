@@ -9,8 +9,6 @@ namespace polycube::hex {
 
 namespace {
 
-constexpr int kEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
-                               {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 constexpr double kSoftMin = 10;  // sharpness of the soft minimum sum exp(-k sj)
 // Vertices of hexes below this scaled Jacobian may leave their patch (block: min 0.12 -> 0.58).
 constexpr double kCrossPatchBelow = 0.3;
@@ -34,7 +32,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   std::vector<std::vector<std::pair<int, int>>> vhj(n);  // per vertex: (hex, its corner index)
   for (int h = 0; h < H.rows(); ++h) {
     for (int i = 0; i < 8; ++i) vhj[H(h, i)].push_back({h, i});
-    for (const auto& e : kEdges) {
+    for (const auto& e : kHexEdges) {
       nb[H(h, e[0])].push_back(H(h, e[1]));
       nb[H(h, e[1])].push_back(H(h, e[0]));
     }

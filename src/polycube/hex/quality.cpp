@@ -125,10 +125,37 @@ QualityStats quality_stats(std::vector<double> values) {
   return q;
 }
 
+double edge_ratio(const double* lengths, int count) {
+  double lo = 1e300, hi = 0;
+  for (int i = 0; i < count; ++i) lo = std::min(lo, lengths[i]), hi = std::max(hi, lengths[i]);
+  return lo > 0 ? std::min(hi / lo, 1e30) : 1e30;
+}
+
+void add_edge_ratios(QualityStats& q, const std::vector<double>& ratios) {
+  q.edge_ratio_max = 0;
+  q.edge_ratio_mean = 0;
+  q.edge_ratio_above_10 = q.edge_ratio_above_100 = 0;
+  int finite = 0;
+  for (double r : ratios) {
+    q.edge_ratio_max = std::max(q.edge_ratio_max, r);
+    q.edge_ratio_above_10 += r > 10;
+    q.edge_ratio_above_100 += r > 100;
+    if (r < 1e30) q.edge_ratio_mean += r, ++finite;
+  }
+  if (finite > 0) q.edge_ratio_mean /= finite;
+}
+
 HexQuality hex_quality(const MatX3d& V, const MatX8i& H) {
-  std::vector<double> s(H.rows());
-  for (int h = 0; h < H.rows(); ++h) s[h] = scaled_jacobian(V, H, h);
-  return quality_stats(std::move(s));
+  std::vector<double> s(H.rows()), ratios(H.rows());
+  for (int h = 0; h < H.rows(); ++h) {
+    s[h] = scaled_jacobian(V, H, h);
+    double len[12];
+    for (int e = 0; e < 12; ++e) len[e] = (V.row(H(h, kHexEdges[e][0])) - V.row(H(h, kHexEdges[e][1]))).norm();
+    ratios[h] = edge_ratio(len, 12);
+  }
+  QualityStats q = quality_stats(std::move(s));
+  add_edge_ratios(q, ratios);
+  return q;
 }
 
 MatX4i boundary_quads(const MatX8i& H, int* nonmanifold) {

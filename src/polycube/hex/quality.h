@@ -12,6 +12,9 @@ namespace polycube::hex {
 /// Local faces of a hexahedron (convention in core/types.h), oriented outward for a positive hex.
 inline constexpr int kHexFaces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4},
                                         {1, 2, 6, 5}, {2, 3, 7, 6}, {3, 0, 4, 7}};
+/// Local edges of a hexahedron: the bottom and top quads' edges, then the four vertical ones.
+inline constexpr int kHexEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
+                                         {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
 
 /// Scaled Jacobian of one hex (Verdict's hex_scaled_jacobian): the minimum, over the 8 corners
 /// and the centre, of det of the three unit edge (or principal axis) vectors. 1 for a cube or
@@ -39,11 +42,22 @@ struct QualityStats {
   /// Histogram of the scaled Jacobian over [-1, 1] in 20 bins of 0.1 (bin 0 = [-1, -0.9)).
   std::array<int, 20> histogram{};
   std::vector<double> per_element;  ///< scaled Jacobian of every element
+  /// Edge ratio (Verdict's edge_ratio: longest over shortest edge of an element, 1e30 when an edge
+  /// has zero length): the scaled Jacobian is 1 for any rectangle or box, however thin, so slivers
+  /// (a 5 x 0.001 quad along a thin chamfer) show here only.
+  double edge_ratio_max = 0;
+  double edge_ratio_mean = 0;  ///< over the elements without a zero-length edge
+  int edge_ratio_above_10 = 0;
+  int edge_ratio_above_100 = 0;
 };
 using HexQuality = QualityStats;
 
 /// Statistics of the given per-element values.
 QualityStats quality_stats(std::vector<double> values);
+/// Adds the edge ratio statistics of the given per-element edge ratios to q.
+void add_edge_ratios(QualityStats& q, const std::vector<double>& ratios);
+/// Verdict's edge ratio of a polygon or polyhedron given by its edge lengths (1e30 when one is 0).
+double edge_ratio(const double* lengths, int count);
 
 HexQuality hex_quality(const MatX3d& V, const MatX8i& H);
 

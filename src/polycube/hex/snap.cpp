@@ -126,6 +126,18 @@ double bbox_diagonal(const MatX3d& X) {
 
 }  // namespace
 
+std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, int k,
+                                            const std::vector<double>& h, double tol) {
+  std::vector<int> tris, tri_plane(B.rows(), -1);
+  for (int f = 0; f < B.rows(); ++f)
+    if (labels[f] / 2 == k) {
+      tris.push_back(f);
+      tri_plane[f] = static_cast<int>(std::lower_bound(h.begin(), h.end(), X(B(f, 0), k) - tol) - h.begin());
+    }
+  int overlaps = 0;
+  return facing_planes(X, B, labels, tri_plane, tris, k, static_cast<int>(h.size()), overlaps);
+}
+
 std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels) {
   std::array<int, 3> o{};
   const double diag = bbox_diagonal(X);

@@ -53,6 +53,13 @@ struct Snapping {
 Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const std::vector<int>& labels,
                        double cells_per_unit, bool constrained = true, double merge_below = 0);
 
+/// The order constraints of the planes of axis k, as the constrained snapping finds them: h the
+/// distinct heights (increasing) of the charts of axis k (a triangle's plane: the first height at
+/// or above its height less tol); out[i] lists the planes j > i that face plane i (a line along k
+/// meets i, then j, with no plane between).
+std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, int k,
+                                            const std::vector<double>& h, double tol);
+
 /// Per axis, the sample lines (through every chart face, as in the snapping) that meet two faces
 /// of the same orientation in a row: > 0 when the polycube overlaps itself.
 std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels);

@@ -65,6 +65,13 @@ MatX4i quads_of_polygons(const MeshData& m) {
 
 }  // namespace
 
+nlohmann::json edge_ratio_json(const hex::QualityStats& q) {
+  return {{"max", q.edge_ratio_max},
+          {"mean", q.edge_ratio_mean},
+          {"above_10", q.edge_ratio_above_10},
+          {"above_100", q.edge_ratio_above_100}};
+}
+
 void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key) {
   auto point = [](const Vec3& p) { return nlohmann::json::array({p.x(), p.y(), p.z()}); };
   j["hausdorff"] = d.max;
@@ -105,14 +112,14 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
     for (int c : q.histogram) hist.push_back(c);
     j[key] = {{"count", q.count},       {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
               {"sj_max", q.sj_max},     {"inverted", q.inverted},     {"below_0_5", q.below_0_5},
-              {"sj_histogram", hist}};
+              {"sj_histogram", hist},   {"edge_ratio", edge_ratio_json(q)}};
   } else {
     const hex::HexQuality q = hex::hex_quality(m.V, m.H);
     nlohmann::json hist = nlohmann::json::array();
     for (int c : q.histogram) hist.push_back(c);
     j[key] = {{"count", q.count},         {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
               {"sj_max", q.sj_max},       {"inverted", q.inverted},     {"below_0_2", q.below_0_2},
-              {"below_0_5", q.below_0_5}, {"sj_histogram", hist}};
+              {"below_0_5", q.below_0_5}, {"sj_histogram", hist},         {"edge_ratio", edge_ratio_json(q)}};
   }
   if (!opt.reference.empty()) {
     hooks.info("reading reference " + opt.reference);

@@ -25,5 +25,7 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks = {});
 /// hausdorff_rel (/ diag), hausdorff_KEY_to_input, hausdorff_input_to_KEY, the points where those
 /// are reached (..._at), mean_distance_rel. Shared by `polycube measure` and the hex stage.
 void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key);
+/// {"max", "mean", "above_10", "above_100"} of the elements' edge ratios (hex::QualityStats).
+nlohmann::json edge_ratio_json(const hex::QualityStats& q);
 
 }  // namespace polycube

@@ -86,6 +86,20 @@ void warn_if_far(const Hooks& hooks, const hex::Hausdorff& d, double diag, const
   hooks.warn(os.str());
 }
 
+/// Elements longer than this many times their width are slivers: valid (the scaled Jacobian of a
+/// thin rectangle is 1) but useless to most solvers; said, with their count.
+constexpr double kSliverRatio = 100;
+void warn_if_slivers(const Hooks& hooks, const hex::QualityStats& q, const std::string& what) {
+  if (q.edge_ratio_above_100 == 0) return;
+  std::ostringstream os;
+  os << q.edge_ratio_above_100 << " " << what << " are slivers (longest edge over " << kSliverRatio
+     << " x the shortest; worst " << (q.edge_ratio_max >= 1e30 ? std::string("an edge of zero length")
+                                                                : std::to_string(q.edge_ratio_max))
+     << "): valid, but too thin for most solvers, and the scaled Jacobian does not show them (a thin "
+        "step kept a cell wide, or a part the polycube map squeezes)";
+  hooks.warn(os.str());
+}
+
 void write_json(const fs::path& p, const json& j) {
   std::ofstream o(p);
   if (!o) throw Error(ErrorKind::Output, p.string() + ": cannot open for writing");
@@ -783,6 +797,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"inverted", qr.quality.inverted},
                           {"below_0_5", qr.quality.below_0_5},
                           {"sj_histogram", hist},
+                          {"edge_ratio", edge_ratio_json(qr.quality)},
                           {"hausdorff", hd.max},
                           {"hausdorff_rel", hd.max / box.diagonal().norm()},
                           {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
@@ -811,6 +826,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                    ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " of the bbox diagonal");
         add_hausdorff(report["quad"], hd, box.diagonal().norm(), "quad");
         warn_if_far(hooks, hd, box.diagonal().norm(), "quad mesh");
+        warn_if_slivers(hooks, qr.quality, "quads");
         hooks.report("quad", 1);
       };
 
@@ -861,7 +877,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           for (int c : q.histogram) hist.push_back(c);
           return json{{"count", q.count},         {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
                       {"sj_max", q.sj_max},       {"inverted", q.inverted},     {"below_0_2", q.below_0_2},
-                      {"below_0_5", q.below_0_5}, {"sj_histogram", hist}};
+                      {"below_0_5", q.below_0_5}, {"sj_histogram", hist},         {"edge_ratio", edge_ratio_json(q)}};
         };
         json hj = quality_json(hr.quality);
         add_hausdorff(hj, hd, diag, "hex");
@@ -892,6 +908,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                    std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
                    ", Hausdorff " + std::to_string(hd.max / diag) + " of the bbox diagonal");
         warn_if_far(hooks, hd, diag, "hex mesh");
+        warn_if_slivers(hooks, hr.quality, "hexes");
         hooks.report("hex", 1);
       }
 
@@ -906,7 +923,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
             quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, PL, cpu, surface, opt.quad, hooks);
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
-                     {"snapping", "sorted_piecewise_linear"}},
+                     {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
+                     {"thin_steps", opt.quad.merge_thin_steps}},
                     json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices}});
       }
       if (opt.until == Stage::Quad && !opt.surface) {

@@ -46,13 +46,18 @@ double scaled_jacobian(const std::array<Vec3, 4>& p) {
 }
 
 QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q) {
-  std::vector<double> s(Q.rows());
+  std::vector<double> s(Q.rows()), ratios(Q.rows());
   for (int f = 0; f < Q.rows(); ++f) {
     std::array<Vec3, 4> p;
     for (int j = 0; j < 4; ++j) p[j] = V.row(Q(f, j)).transpose();
     s[f] = scaled_jacobian(p);
+    double len[4];
+    for (int j = 0; j < 4; ++j) len[j] = (p[(j + 1) % 4] - p[j]).norm();
+    ratios[f] = hex::edge_ratio(len, 4);
   }
-  return hex::quality_stats(std::move(s));
+  QuadQuality q = hex::quality_stats(std::move(s));
+  hex::add_edge_ratios(q, ratios);
+  return q;
 }
 
 QuadResult quad_mesh_from_hexes(const MatX3d& HV, const MatX8i& H, const SurfaceMesh& target,

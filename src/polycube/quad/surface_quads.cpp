@@ -26,7 +26,8 @@ struct AxisMap {
     if (x == h[i]) return n[i];
     return n[i] + (x - h[i]) / (h[i + 1] - h[i]) * (n[i + 1] - n[i]);
   }
-  /// The inverse (n is strictly increasing: distinct heights never share an integer).
+  /// The inverse (n is non-decreasing; where merged heights share an integer, it gives the highest
+  /// of them, the map being constant between them).
   double inverse(double y) const {
     if (h.empty()) return y / s;
     if (y <= n.front()) return h.front() + (y - n.front()) / s;
@@ -65,9 +66,34 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     for (double x : raw[k])
       if (h.empty() || x - h.back() > tol) h.push_back(x);
     map[k].h = h;
-    map[k].n = hex::snap_heights(h, cells_per_unit);
     map[k].s = cells_per_unit;
     r.planes[k] = static_cast<int>(h.size());
+    // Thin steps (QuadOptions::merge_thin_steps): runs of consecutive planes spanning less than
+    // that many cells, no two of which face each other, share one integer (the per-axis map is
+    // then constant between them: their risers lose their height). Closed surfaces only (the
+    // border lines of an open one are heights too).
+    std::vector<int> group(h.size());
+    std::vector<double> hg;
+    const std::vector<std::vector<int>> facing =
+        loops.empty() && opt.merge_thin_steps > 0 ? hex::facing_planes(X, F, labels, k, h, tol)
+                                                  : std::vector<std::vector<int>>(h.size());
+    for (size_t p = 0; p < h.size();) {
+      size_t q = p + 1;
+      for (; loops.empty() && q < h.size() && cells_per_unit * (h[q] - h[p]) < opt.merge_thin_steps; ++q) {
+        bool faces = false;
+        for (size_t m = p; m < q && !faces; ++m)
+          faces = std::find(facing[m].begin(), facing[m].end(), static_cast<int>(q)) != facing[m].end();
+        if (faces) break;
+      }
+      double mean = 0;
+      for (size_t m = p; m < q; ++m) group[m] = static_cast<int>(hg.size()), mean += h[m] / static_cast<double>(q - p);
+      r.merged_planes += static_cast<int>(q - p - 1);
+      hg.push_back(mean);
+      p = q;
+    }
+    const std::vector<int> ng = hex::snap_heights(hg, cells_per_unit);
+    map[k].n.resize(h.size());
+    for (size_t i = 0; i < h.size(); ++i) map[k].n[i] = ng[group[i]];
   }
   MatX3d Y(X.rows(), 3);
   for (int v = 0; v < X.rows(); ++v)
@@ -160,6 +186,15 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     }
     if (label % 2) std::swap(q[1], q[3]);  // -k: clockwise in (a, b) is counter-clockwise seen from -k
     quads.push_back(q);
+  }
+  if (missing > 0 && r.merged_planes > 0) {
+    // A merged step whose riser was not thin everywhere (the planes' points no longer match):
+    // every plane keeps its cell instead.
+    hooks.debug(std::to_string(missing) + " grid squares miss a corner with " + std::to_string(r.merged_planes) +
+                " planes of thin steps merged: extracting again without merging");
+    QuadOptions o = opt;
+    o.merge_thin_steps = 0;
+    return quad_mesh_from_surface_polycube(rest, F, X, labels, cells_per_unit, target, o, hooks);
   }
   if (missing > 0)
     throw Error(ErrorKind::Polycube, std::to_string(missing) + " grid squares of the surface polycube miss a corner");
