@@ -235,14 +235,19 @@ TEST(RealDeformation, SliversDoNotStallTheHand) {
 class RealSurfaceQuads : public ::testing::TestWithParam<std::string> {};
 
 namespace {
-// The report of --surface --quad on `path`, written under a temporary folder named by `tag`.
-nlohmann::json surface_quads(const std::string& path, const std::string& tag) {
+// The options of --surface --quad on `path`, written under a temporary folder named by `tag`.
+PipelineOptions surface_quad_options(const std::string& path, const std::string& tag) {
   PipelineOptions opt;
   opt.input = path;
   opt.out_dir = temp_dir(tag);
   opt.surface = true;
   opt.until = Stage::Quad;
-  return run_pipeline(opt);
+  return opt;
+}
+
+// The report of --surface --quad on `path`.
+nlohmann::json surface_quads(const std::string& path, const std::string& tag) {
+  return run_pipeline(surface_quad_options(path, tag));
 }
 }  // namespace
 
@@ -278,11 +283,7 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealSurfaceQuads, ::testing::Values("basi
 TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
   const std::string path = shared_dir() + "/meshes/cad/fandisk.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_surface_creases");
-  opt.surface = true;
-  opt.until = Stage::Quad;
+  PipelineOptions opt = surface_quad_options(path, "real_surface_creases");
   opt.target_quads = 724;
   // The layout whose creases this test was written on: the surface realization's global
   // untangling rounds first (since 2026-11-27 the local untangling runs first, whose polycube
@@ -311,11 +312,7 @@ TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
 TEST(RealSurfaceQuadsCreases, FandiskQuadsWithTheDefaultRealization) {
   const std::string path = shared_dir() + "/meshes/cad/fandisk.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt;
-  opt.input = path;
-  opt.out_dir = temp_dir("real_surface_fandisk_default");
-  opt.surface = true;
-  opt.until = Stage::Quad;
+  PipelineOptions opt = surface_quad_options(path, "real_surface_fandisk_default");
   opt.target_quads = 724;
   nlohmann::json j = run_pipeline(opt);
   const auto& p = j["polycube"];
@@ -337,11 +334,7 @@ TEST(RealSurfaceQuads, ThinStepsOfTheBlockGiveNoSliverRows) {
   const std::string path = shared_dir() + "/meshes/cad/block.stl";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
   auto run = [&](double thin) {
-    PipelineOptions opt;
-    opt.input = path;
-    opt.out_dir = temp_dir("real_surface_block");
-    opt.surface = true;
-    opt.until = Stage::Quad;
+    PipelineOptions opt = surface_quad_options(path, "real_surface_block");
     opt.quad.merge_thin_steps = thin;
     return run_pipeline(opt);
   };

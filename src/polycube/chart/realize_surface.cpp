@@ -288,16 +288,14 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     }
     return E;
   };
-  // The Jacobian determinant of triangle f's map (rest -> its chart's plane, scaled), and its
-  // elliptic energy without the weight (2 for a rotation).
-  auto triangle_det = [&](const MatX3d& X, const Elliptic& el, int f, double eps, double* energy) {
+  // The Jacobian determinant of triangle f's map (rest -> its chart's plane, scaled).
+  auto triangle_det = [&](const MatX3d& X, const Elliptic& el, int f) {
     const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
     const double sg = labels[f] % 2 ? -1.0 : 1.0;
     Eigen::Vector2d q[3];
     for (int j = 0; j < 3; ++j) q[j] = Eigen::Vector2d(sg * X(F(f, j), a), X(F(f, j), b));
     double D;
-    const double E = untangle_triangle(q, el.Dm_inv[f], el.scale, 1.0, eps, el.theta, D, nullptr);
-    if (energy) *energy = E;
+    untangle_triangle(q, el.Dm_inv[f], el.scale, 1.0, 1.0, el.theta, D, nullptr);
     return D;
   };
   // One Newton step of vertex v over its free coordinates (those no plane holds) on the elliptic
@@ -386,7 +384,7 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       const std::vector<int> region = grow_region(folded, 2);
       double dmin = std::numeric_limits<double>::infinity();
       for (int v : region)
-        for (int f : vf[v]) dmin = std::min(dmin, triangle_det(X, el, f, 1.0, nullptr));
+        for (int f : vf[v]) dmin = std::min(dmin, triangle_det(X, el, f));
       const double eps = dmin < 0 ? std::max(1e-12, 0.1 * -dmin) : 1e-8;
       for (int inner = 0; inner < 10; ++inner)
         for (int v : region) newton_vertex(X, el, v, eps);
@@ -616,11 +614,12 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
         z, [&](const Eigen::VectorXd& zz, Eigen::VectorXd* gg) { return energy(el, zz, eps, gg); }, precondition, lo, E);
     X = to_X(z);
     const int folded = misoriented(X);
-    hooks.debug("surface relaxation: " + std::to_string(its) + " iterations, elliptic energy " + std::to_string(E0) +
-                " -> " + std::to_string(E) + ", max isometric distortion " +
-                std::to_string(isometric_distortion_surface(rest, X0, F).max) + " -> " +
-                std::to_string(isometric_distortion_surface(rest, X, F).max) +
-                (folded > 0 ? ", " + std::to_string(folded) + " misoriented: undone" : ""));
+    if (hooks.log)  // the distortion figures are for the log only
+      hooks.debug("surface relaxation: " + std::to_string(its) + " iterations, elliptic energy " +
+                  std::to_string(E0) + " -> " + std::to_string(E) + ", max isometric distortion " +
+                  std::to_string(isometric_distortion_surface(rest, X0, F).max) + " -> " +
+                  std::to_string(isometric_distortion_surface(rest, X, F).max) +
+                  (folded > 0 ? ", " + std::to_string(folded) + " misoriented: undone" : ""));
     if (folded > 0) X = X0;
   }
   const double e_prev = deform::surface_arap_energy(X, F, ar, 1.0, nullptr, nullptr);

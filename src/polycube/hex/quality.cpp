@@ -139,7 +139,7 @@ void add_edge_ratios(QualityStats& q, const std::vector<double>& ratios) {
   for (double r : ratios) {
     q.edge_ratio_max = std::max(q.edge_ratio_max, r);
     q.edge_ratio_above_10 += r > 10;
-    q.edge_ratio_above_100 += r > 100;
+    q.edge_ratio_above_100 += r > kSliverEdgeRatio;
     if (r < 1e30) q.edge_ratio_mean += r, ++finite;
   }
   if (finite > 0) q.edge_ratio_mean /= finite;

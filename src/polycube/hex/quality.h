@@ -32,6 +32,9 @@ double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int 
 /// corners joined to it by an edge, and the centre).
 unsigned scaled_jacobian_dependents(int j);
 
+/// Elements whose edge ratio exceeds this are slivers (QualityStats::edge_ratio_above_100).
+inline constexpr double kSliverEdgeRatio = 100;
+
 /// Statistics of per-element scaled Jacobians (hexes or quads).
 struct QualityStats {
   int count = 0;

@@ -126,6 +126,26 @@ double bbox_diagonal(const MatX3d& X) {
 
 }  // namespace
 
+std::vector<int> thin_step_groups(const std::vector<double>& h, double s, double merge_below,
+                                  const std::vector<std::vector<int>>& facing, std::vector<double>& group_heights) {
+  const int np = static_cast<int>(h.size());
+  std::vector<int> group(np);
+  group_heights.clear();
+  for (int p = 0; p < np;) {
+    int q = p + 1;
+    for (; merge_below > 0 && q < np && s * (h[q] - h[p]) < merge_below; ++q) {
+      bool faces = false;
+      for (int m = p; m < q && !faces; ++m) faces = std::find(facing[m].begin(), facing[m].end(), q) != facing[m].end();
+      if (faces) break;
+    }
+    double mean = 0;
+    for (int m = p; m < q; ++m) group[m] = static_cast<int>(group_heights.size()), mean += h[m] / (q - p);
+    group_heights.push_back(mean);
+    p = q;
+  }
+  return group;
+}
+
 std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, int k,
                                             const std::vector<double>& h, double tol) {
   std::vector<int> tris, tri_plane(B.rows(), -1);
@@ -216,25 +236,9 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
       cp.erase(std::unique(cp.begin(), cp.end()), cp.end());
       for (size_t i = 0; i + 1 < cp.size(); ++i)
         if (cp[i].first == cp[i + 1].first) above[cp[i].second].push_back(cp[i + 1].second);
-      // Thin steps: runs of consecutive planes spanning less than merge_below cells, no two of which
-      // face each other (through the volume or a gap), share one integer; their risers (the charts
-      // between them) lose their height instead of getting a one-cell layer of hexes that maps
-      // into a fraction of a cell.
-      std::vector<int> group(np);
       std::vector<double> hg;
-      for (int p = 0; p < np;) {
-        int q = p + 1;
-        for (; merge_below > 0 && q < np && s * (h[q] - h[p]) < merge_below; ++q) {
-          bool faces = false;
-          for (int m = p; m < q && !faces; ++m) faces = std::find(facing[m].begin(), facing[m].end(), q) != facing[m].end();
-          if (faces) break;
-        }
-        double mean = 0;
-        for (int m = p; m < q; ++m) group[m] = static_cast<int>(hg.size()), mean += h[m] / (q - p);
-        sn.merged[k] += q - p - 1;
-        hg.push_back(mean);
-        p = q;
-      }
+      const std::vector<int> group = thin_step_groups(h, s, merge_below, facing, hg);
+      sn.merged[k] += np - static_cast<int>(hg.size());
       std::vector<std::vector<int>> above_g(hg.size());
       for (int i = 0; i < np; ++i)
         for (int j : above[i])

@@ -60,6 +60,15 @@ Snapping snap_polycube(const MatX3d& X, const MatX4i& T, const MatX3i& B, const 
 std::vector<std::vector<int>> facing_planes(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels, int k,
                                             const std::vector<double>& h, double tol);
 
+/// Thin steps: runs of consecutive planes (heights h, increasing) spanning less than merge_below
+/// cells (s cells per unit), no two of which face each other (facing: as facing_planes gives),
+/// share one integer; their risers (the charts between them) lose their height instead of getting
+/// a one-cell layer of hexes, or row of quads, that maps into a fraction of a cell. Returns each
+/// plane's group; group_heights receives the groups' mean heights (increasing). merge_below <= 0:
+/// every plane its own group.
+std::vector<int> thin_step_groups(const std::vector<double>& h, double s, double merge_below,
+                                  const std::vector<std::vector<int>>& facing, std::vector<double>& group_heights);
+
 /// Per axis, the sample lines (through every chart face, as in the snapping) that meet two faces
 /// of the same orientation in a row: > 0 when the polycube overlaps itself.
 std::array<int, 3> overlap_lines(const MatX3d& X, const MatX3i& B, const std::vector<int>& labels);

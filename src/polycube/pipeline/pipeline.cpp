@@ -86,13 +86,12 @@ void warn_if_far(const Hooks& hooks, const hex::Hausdorff& d, double diag, const
   hooks.warn(os.str());
 }
 
-/// Elements longer than this many times their width are slivers: valid (the scaled Jacobian of a
-/// thin rectangle is 1) but useless to most solvers; said, with their count.
-constexpr double kSliverRatio = 100;
+/// Slivers (edge ratio over hex::kSliverEdgeRatio) are valid (the scaled Jacobian of a thin
+/// rectangle is 1) but useless to most solvers: said, with their count.
 void warn_if_slivers(const Hooks& hooks, const hex::QualityStats& q, const std::string& what) {
   if (q.edge_ratio_above_100 == 0) return;
   std::ostringstream os;
-  os << q.edge_ratio_above_100 << " " << what << " are slivers (longest edge over " << kSliverRatio
+  os << q.edge_ratio_above_100 << " " << what << " are slivers (longest edge over " << hex::kSliverEdgeRatio
      << " x the shortest; worst " << (q.edge_ratio_max >= 1e30 ? std::string("an edge of zero length")
                                                                 : std::to_string(q.edge_ratio_max))
      << "): valid, but too thin for most solvers, and the scaled Jacobian does not show them (a thin "

@@ -72,25 +72,12 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     // that many cells, no two of which face each other, share one integer (the per-axis map is
     // then constant between them: their risers lose their height). Closed surfaces only (the
     // border lines of an open one are heights too).
-    std::vector<int> group(h.size());
-    std::vector<double> hg;
+    const double merge = loops.empty() ? opt.merge_thin_steps : 0;
     const std::vector<std::vector<int>> facing =
-        loops.empty() && opt.merge_thin_steps > 0 ? hex::facing_planes(X, F, labels, k, h, tol)
-                                                  : std::vector<std::vector<int>>(h.size());
-    for (size_t p = 0; p < h.size();) {
-      size_t q = p + 1;
-      for (; loops.empty() && q < h.size() && cells_per_unit * (h[q] - h[p]) < opt.merge_thin_steps; ++q) {
-        bool faces = false;
-        for (size_t m = p; m < q && !faces; ++m)
-          faces = std::find(facing[m].begin(), facing[m].end(), static_cast<int>(q)) != facing[m].end();
-        if (faces) break;
-      }
-      double mean = 0;
-      for (size_t m = p; m < q; ++m) group[m] = static_cast<int>(hg.size()), mean += h[m] / static_cast<double>(q - p);
-      r.merged_planes += static_cast<int>(q - p - 1);
-      hg.push_back(mean);
-      p = q;
-    }
+        merge > 0 ? hex::facing_planes(X, F, labels, k, h, tol) : std::vector<std::vector<int>>(h.size());
+    std::vector<double> hg;
+    const std::vector<int> group = hex::thin_step_groups(h, cells_per_unit, merge, facing, hg);
+    r.merged_planes += static_cast<int>(h.size() - hg.size());
     const std::vector<int> ng = hex::snap_heights(hg, cells_per_unit);
     map[k].n.resize(h.size());
     for (size_t i = 0; i < h.size(); ++i) map[k].n[i] = ng[group[i]];
