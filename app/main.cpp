@@ -250,6 +250,14 @@ int main(int argc, char** argv) {
                  "(the step's riser vanishes instead of getting a layer of flat hexes or a row of sliver quads); "
                  "0 = every step keeps a cell")
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
+  app.add_option("--grading", hx.grading.strength,
+                 "Hex mesh: sheets of hexes denser where the polycube map stretches the boundary (exponent on "
+                 "the stretch: 0 = uniform grid, as the paper's; 1 = full)")
+      ->capture_default_str()->check(CLI::Range(0.0, 2.0));
+  app.add_option("--grading-measure", hx.grading.measure, "Hex mesh: what the grading follows: chord or stretch")
+      ->capture_default_str()->check(CLI::IsMember({"chord", "stretch"}));
+  app.add_option("--grading-max", hx.grading.max_ratio, "Hex mesh: the grading's largest density ratio")
+      ->capture_default_str()->check(CLI::Range(1.0, 100.0));
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
   int fit_rounds = hx.fit.rounds;

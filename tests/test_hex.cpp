@@ -9,6 +9,7 @@
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/extract.h"
+#include "polycube/hex/grading.h"
 #include "polycube/hex/quality.h"
 #include "polycube/hex/snap.h"
 #include "test_util.h"
@@ -387,4 +388,72 @@ TEST(Hex, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {
   ASSERT_EQ(a.V.rows(), b.V.rows());
   EXPECT_EQ((a.V - b.V).cwiseAbs().maxCoeff(), 0.0);
   EXPECT_EQ(a.quality.sj_mean, b.quality.sj_mean);
+}
+
+TEST(Hex, GradingWarpIsMonotoneAndInvertible) {
+  hex::AxisWarp w;
+  w.lo = -1;
+  w.width = 0.5;
+  w.at = {0, 0.5, 2, 2.25};
+  for (double x : {-1.7, -1.0, -0.8, -0.5, 0.0, 0.3, 0.5, 0.9}) EXPECT_NEAR(w.inverse(w(x)), x, 1e-12);
+  EXPECT_DOUBLE_EQ(w(-0.25), 1.25);  // midway through the second bin
+  EXPECT_DOUBLE_EQ(w(1.0), 2.5);     // beyond the last breakpoint: the last slope
+}
+
+TEST(Hex, GradedGridFollowsTheCurvedPart) {
+  // A 4 x 1 x 1 bar as its own polycube; the rest shape keeps x < 2 straight and bends x > 2 round
+  // a circle of radius 1.5 (the bar's axis) by 76 degrees: only the bent half is curved, along x.
+  const SurfaceMesh bar = grid_box(16, Vec3(0, 0, 0), Vec3(4, 1, 1));
+  const TetMesh tm = tet_mesh_of(bar.V, bar.F, 4000);
+  const double Rc = 1.5;
+  MatX3d rest = tm.V;
+  for (int v = 0; v < rest.rows(); ++v) {
+    const double x = tm.V(v, 0), z = tm.V(v, 2);
+    if (x <= 2) continue;
+    const double th = (x - 2) / Rc, r = Rc - (z - 0.5);
+    rest(v, 0) = 2 + r * std::sin(th);
+    rest(v, 2) = 0.5 + Rc - r * std::cos(th);
+  }
+  ASSERT_EQ(measure_tets(rest, tm.T).inverted, 0);
+  const std::vector<int> labels = chart::label_by_normal(tm.V, tm.boundary);
+  const SurfaceMesh target{rest, tm.boundary};
+
+  hex::GradingOptions go;
+  go.strength = 1;
+  const hex::Grading g = hex::grade_polycube(rest, tm.T, tm.V, tm.boundary, labels, 4, go);
+  // y and z: nothing curves along them, the grid stays uniform; x: denser sheets in the bent half.
+  for (int k : {1, 2}) EXPECT_DOUBLE_EQ(g.max_slope[k], g.min_slope[k]);
+  auto slope = [&](double x) { return (g.warp[0](x + 0.05) - g.warp[0](x - 0.05)) / 0.1; };
+  EXPECT_GT(slope(3.0), 1.5 * slope(0.5));
+  EXPECT_NEAR(slope(0.25), slope(0.75), 1e-9);
+  EXPECT_NEAR(slope(2.5), slope(3.5), 1e-9);
+  EXPECT_EQ(g.left_inverted, 0);
+  // The warped polycube is still the polycube: each chart on one plane, same volume.
+  double volume = 0;
+  for (int t = 0; t < tm.T.rows(); ++t)
+    volume += tet_volume(g.Y.row(tm.T(t, 0)), g.Y.row(tm.T(t, 1)), g.Y.row(tm.T(t, 2)), g.Y.row(tm.T(t, 3)));
+  EXPECT_NEAR(volume, 4.0, 1e-9);
+  for (int f = 0; f < tm.boundary.rows(); ++f) {
+    const int a = labels[f] / 2;
+    EXPECT_DOUBLE_EQ(g.Y(tm.boundary(f, 0), a), g.Y(tm.boundary(f, 1), a));
+    EXPECT_DOUBLE_EQ(g.Y(tm.boundary(f, 0), a), g.Y(tm.boundary(f, 2), a));
+  }
+
+  // Hexes at about the same count: the graded grid follows the bend more closely.
+  hex::HexOptions o;
+  o.cells_per_unit = 3;
+  o.pillow = "off";
+  o.grading.strength = 0;
+  auto distance = [&](const hex::HexResult& r) {
+    return hex::hausdorff(r.V, hex::triangulate_quads(hex::boundary_quads(r.H)), target.V, target.F, 50000).max;
+  };
+  const hex::HexResult uniform = hex::hex_mesh_from_polycube(rest, tm.T, tm.V, tm.boundary, labels, &target, o);
+  o.grading.strength = 1;
+  const hex::HexResult graded = hex::hex_mesh_from_polycube(rest, tm.T, tm.V, tm.boundary, labels, &target, o);
+  EXPECT_EQ(uniform.quality.inverted, 0);
+  EXPECT_EQ(graded.quality.inverted, 0);
+  EXPECT_NEAR(static_cast<double>(graded.H.rows()) / uniform.H.rows(), 1.0, 0.2);
+  EXPECT_LT(distance(graded), 0.8 * distance(uniform));
+  EXPECT_DOUBLE_EQ(uniform.grading_max_slope[0], 0.0);
+  EXPECT_GT(graded.grading_max_slope[0], graded.grading_min_slope[0]);
 }

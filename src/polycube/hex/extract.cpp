@@ -11,6 +11,7 @@
 #include "polycube/geometry/closest_point.h"
 #include "polycube/geometry/features.h"
 #include "polycube/geometry/tet_locator.h"
+#include "polycube/hex/grading.h"
 #include "polycube/hex/optimize.h"
 #include "polycube/hex/snap.h"
 
@@ -50,7 +51,7 @@ struct GridKeyHash {
 
 }  // namespace
 
-HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
+HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X_in, const MatX3i& B,
                                  const std::vector<int>& labels, const SurfaceMesh* target_in, const HexOptions& opt,
                                  const Hooks& hooks) {
   Stopwatch sw;
@@ -60,11 +61,11 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   SurfaceMesh compacted;
   const SurfaceMesh* target = target_in ? &surface_alone(*target_in, compacted) : nullptr;
   POLYCUBE_ASSERT(static_cast<int>(labels.size()) == B.rows(), "one label per boundary triangle");
-  POLYCUBE_ASSERT(rest.rows() == X.rows(), "rest and polycube positions differ in size");
+  POLYCUBE_ASSERT(rest.rows() == X_in.rows(), "rest and polycube positions differ in size");
 
   // ---- planes and scale ------------------------------------------------------------------
   double volume = 0;
-  for (int t = 0; t < T.rows(); ++t) volume += tet_volume(X, T, t);
+  for (int t = 0; t < T.rows(); ++t) volume += tet_volume(X_in, T, t);
   if (!(volume > 0)) throw Error(ErrorKind::Polycube, "the polycube has no volume: no hex mesh can be built");
   Eigen::AlignedBox3d rest_box;
   for (int v = 0; v < rest.rows(); ++v) rest_box.extend(rest.row(v).transpose());
@@ -79,6 +80,24 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     s = std::cbrt(opt.target_hexes / volume);
   }
   r.cells_per_unit = s;
+  // Graded grid (grading.h): the snapping and the extraction work on the polycube warped per axis.
+  Grading graded;
+  const bool grade = opt.grading.strength > 0;
+  if (grade) {
+    GradingOptions go = opt.grading;
+    go.sharp_angle_deg = opt.sharp_angle_deg;
+    graded = grade_polycube(rest, T, X_in, B, labels, s, go);
+    for (int k = 0; k < 3; ++k) {
+      r.grading_max_slope[k] = graded.max_slope[k];
+      r.grading_min_slope[k] = graded.min_slope[k];
+    }
+  }
+  const MatX3d& X = grade ? graded.Y : X_in;
+  if (grade) {
+    hooks.debug("grading: sheet density per axis " + std::to_string(graded.min_slope[0]) + "-" + std::to_string(graded.max_slope[0]) + ", " +
+                std::to_string(graded.min_slope[1]) + "-" + std::to_string(graded.max_slope[1]) + ", " + std::to_string(graded.min_slope[2]) +
+                "-" + std::to_string(graded.max_slope[2]) + "; " + std::to_string(graded.turned_over) + " tets turned over, " + std::to_string(graded.left_inverted) + " left after untangling");
+  }
   // Snapping: planes that face each other keep their order and a cell between them, the others may
   // share an integer; the polycube deformed to the snapped planes (Y, grid units) must keep every
   // tet positive, else the plain sorted snapping is tried, and last the per-axis piecewise-linear
@@ -113,6 +132,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     maps[k].h = sn.heights[k];
     maps[k].n = sn.snapped[k];
     r.heights[k] = sn.heights[k];
+    if (grade)
+      for (double& h : r.heights[k]) h = graded.warp[k].inverse(h);
     r.snapped[k] = sn.snapped[k];
     r.cells[k] = *std::max_element(sn.snapped[k].begin(), sn.snapped[k].end());
     r.shared_planes += sn.shared[k];

@@ -22,6 +22,7 @@
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
 #include "polycube/geometry/surface_fit.h"
+#include "polycube/hex/grading.h"
 #include "polycube/hex/quality.h"
 
 namespace polycube::hex {
@@ -67,6 +68,8 @@ struct HexOptions {
   /// merged); spot: 3 merged, mean and Hausdorff a little better; rod, fandisk: no step that thin
   /// (rod at 0.25: 0.673 against 0.702). 0 = every step keeps a cell.
   double merge_thin_steps = 0.01;
+  /// Graded grid (grading.h): sheets of hexes denser where the polycube map stretches the boundary.
+  GradingOptions grading;
   /// After the optimization, boundary vertices off features slide on the target so that it comes
   /// closer to the hex boundary, no hex around a moved vertex dropping below min(floor, its worst
   /// before) (geometry/surface_fit.h; rounds = 0: off).
@@ -84,6 +87,7 @@ struct HexResult {
   std::string snapping;           ///< "constrained", "sorted" or "piecewise_linear" (see snap.h)
   int shared_planes = 0;          ///< planes sharing their integer height with another (constrained snapping)
   int merged_planes = 0;          ///< of those, planes of thin steps merged (HexOptions::merge_thin_steps)
+  std::array<double, 3> grading_max_slope{}, grading_min_slope{};  ///< the grading's extreme sheet densities per axis (relative; 0: uniform grid)
   double min_slab_ratio = 0;      ///< thinnest slab between planes, in cells, over the cell it got (see snap.h)
   int grid_hexes = 0;             ///< hexes of the grid (before pillowing)
   int pillow_hexes = 0;           ///< hexes of the boundary layer (0: not pillowed)

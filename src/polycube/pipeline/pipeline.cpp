@@ -885,7 +885,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                       {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
                       {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
                       {"merged_planes", hr.merged_planes}, {"thin_steps", ho.merge_thin_steps},
-                      {"min_slab_ratio", hr.min_slab_ratio}};
+                      {"min_slab_ratio", hr.min_slab_ratio},
+                      {"grading_density_min", hr.grading_min_slope}, {"grading_density_max", hr.grading_max_slope}};
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["retries"] = retries;
         hj["sharp_vertices"] = hr.sharp_vertices;
@@ -899,7 +900,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
                          {"thin_steps", opt.hex.merge_thin_steps}, {"fit_rounds", opt.hex.fit.rounds},
-                         {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg}};
+                         {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
+                         {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
+                         {"grading_max", opt.hex.grading.max_ratio}};
         hj["seconds"] = sh.seconds();
         report["hex"] = hj;
         report["timings"]["hex"] = sh.seconds();
