@@ -142,6 +142,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   bool locality_order = false;
   app.add_flag("--locality-order", locality_order, "DeformOptions::locality_order for the volume runs");
+  double grading = hex::GradingOptions{}.strength;
+  app.add_option("--grading", grading, "HexOptions::grading.strength (0: the paper's uniform grid)")->capture_default_str();
   bool deform_only = false;
   app.add_flag("--deform-only", deform_only,
                "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
@@ -235,6 +237,7 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
       if (rr.success) {
         hex::HexOptions ho;
+        ho.grading.strength = grading;
         std::string q1 = "-", q2 = "-", q3 = "-", q4 = "-";
         if (!m.paper_row.empty() && paper.count(m.paper_row) && paper[m.paper_row][8] != "-") {
           auto& c = paper[m.paper_row];

@@ -651,6 +651,22 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   EXPECT_LT(b["hex"]["mean_distance_rel"].get<double>(), b0["hex"]["mean_distance_rel"].get<double>());
   EXPECT_GE(b["hex"]["sj_min"].get<double>(), b0["hex"]["sj_min"].get<double>() - 1e-9);
   EXPECT_EQ(b["hex"]["count"], b0["hex"]["count"]);
+  // The graded grid (default) and the paper's uniform one (--grading 0), as reported.
+  EXPECT_DOUBLE_EQ(b["hex"]["options"]["grading"].get<double>(), 0.5);
+  EXPECT_EQ(b["hex"]["options"]["grading_measure"], "chord");
+  r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --grading 0 -q -o " + dir + "/bu");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json bu = report(dir + "/bu");
+  EXPECT_DOUBLE_EQ(bu["hex"]["options"]["grading"].get<double>(), 0.0);
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_EQ(bu["hex"]["grid"]["grading_density_max"][k].get<double>(), 0.0);
+    EXPECT_GT(b["hex"]["grid"]["grading_density_min"][k].get<double>(), 0.0);
+    EXPECT_GE(b["hex"]["grid"]["grading_density_max"][k].get<double>(),
+              b["hex"]["grid"]["grading_density_min"][k].get<double>());
+  }
+  EXPECT_EQ(bu["hex"]["inverted"], 0);
+  EXPECT_EQ(run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --grading -1 -q -o " +
+                    dir + "/bx").code, 2);
   // A map of another mesh is refused, naming the mismatch, and nothing is presented as a result.
   ASSERT_EQ(run_cli("--example sphere --until tet -q -o " + dir + "/c").code, 0);
   r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/c/tetmesh.mesh --hex -o " + dir + "/d");
