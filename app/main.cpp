@@ -311,6 +311,8 @@ int main(int argc, char** argv) {
   if (no_creases) opt.quad.capture_creases = false;
   opt.quad.sharp_angle_deg = hx.sharp_angle_deg;
   opt.quad.merge_thin_steps = hx.merge_thin_steps;
+  // Surface-mode quads are graded only on request (hexes by default).
+  if (app.count("--grading") > 0) opt.quad.grading = hx.grading;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
   hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size

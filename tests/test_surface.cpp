@@ -438,3 +438,33 @@ TEST(SurfaceCli, QuadCountAloneAsksForQuads) {
   EXPECT_FALSE(std::filesystem::exists(dir + "/o2/quad.obj"));
   EXPECT_EQ(run_cli("--example box_hole --surface --hexes 600 -o " + dir + "/o3 -q").code, 2);
 }
+
+TEST(SurfaceQuads, GradedRowsFollowTheCurvedPart) {
+  // A 4 x 1 x 1 bar's surface as its own polycube; the rest shape bends x > 2 round a circle of
+  // radius 1.5 by 76 degrees (as Hex.GradedGridFollowsTheCurvedPart). Graded rows (the area kept)
+  // put more rows of quads in the bent half and come closer to it with about as many quads.
+  const SurfaceMesh bar = grid_box(16, Vec3(0, 0, 0), Vec3(4, 1, 1));
+  SurfaceMesh bent = bar;
+  const double Rc = 1.5;
+  for (int v = 0; v < bent.V.rows(); ++v) {
+    const double x = bar.V(v, 0), z = bar.V(v, 2);
+    if (x <= 2) continue;
+    const double th = (x - 2) / Rc, r = Rc - (z - 0.5);
+    bent.V(v, 0) = 2 + r * std::sin(th);
+    bent.V(v, 2) = 0.5 + Rc - r * std::cos(th);
+  }
+  const std::vector<int> labels = chart::label_by_normal(bar.V, bar.F);
+  quad::QuadOptions o;
+  auto distance = [&](const quad::QuadResult& q) {
+    return hex::hausdorff(q.V, hex::triangulate_quads(q.Q), bent.V, bent.F, 50000).max;
+  };
+  const quad::QuadResult uniform = quad::quad_mesh_from_surface_polycube(bent.V, bent.F, bar.V, labels, 3, bent, o);
+  o.grading.strength = 1;
+  const quad::QuadResult graded = quad::quad_mesh_from_surface_polycube(bent.V, bent.F, bar.V, labels, 3, bent, o);
+  EXPECT_EQ(uniform.grading_max[0], 0.0);
+  EXPECT_GT(graded.grading_max[0], graded.grading_min[0]);
+  EXPECT_DOUBLE_EQ(graded.grading_max[1], graded.grading_min[1]);
+  EXPECT_NEAR(static_cast<double>(graded.Q.rows()) / uniform.Q.rows(), 1.0, 0.2);
+  EXPECT_EQ(graded.quality.inverted, 0);
+  EXPECT_LT(distance(graded), 0.8 * distance(uniform));
+}

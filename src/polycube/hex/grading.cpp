@@ -36,6 +36,15 @@ double volume_of(const MatX3d& X, const MatX4i& T) {
   return v;
 }
 
+double area_of(const MatX3d& X, const MatX3i& F) {
+  double a = 0;
+  for (int f = 0; f < F.rows(); ++f) {
+    const Vec3 p = X.row(F(f, 0)), q = X.row(F(f, 1)), r = X.row(F(f, 2));
+    a += (q - p).cross(r - p).norm() / 2;
+  }
+  return a;
+}
+
 }  // namespace
 
 Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
@@ -168,8 +177,15 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
   g.Y.resize(nv, 3);
   for (int v = 0; v < nv; ++v)
     for (int k = 0; k < 3; ++k) g.Y(v, k) = g.warp[k](X(v, k));
-  const double vx = volume_of(X, T), vy = volume_of(g.Y, T);
-  const double c = vy > 0 ? std::cbrt(vx / vy) : 1;
+  // Surface polycube (no tets): the area is kept instead.
+  double c = 1;
+  if (T.rows() > 0) {
+    const double vx = volume_of(X, T), vy = volume_of(g.Y, T);
+    c = vy > 0 ? std::cbrt(vx / vy) : 1;
+  } else {
+    const double ax = area_of(X, B), ay = area_of(g.Y, B);
+    c = ay > 0 ? std::sqrt(ax / ay) : 1;
+  }
   for (int k = 0; k < 3; ++k) {
     for (double& a : g.warp[k].at) a = lo[k] + c * (a - lo[k]);
     g.max_slope[k] *= c;
@@ -182,7 +198,7 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
   for (int k = 0; k < 3; ++k) fixed[k].assign(nv, 0);
   for (int f = 0; f < B.rows(); ++f)
     for (int c = 0; c < 3; ++c) fixed[labels[f] / 2][B(f, c)] = 1;
-  for (int t = 0; t < T.rows(); ++t) {
+  for (int t = 0; t < T.rows(); ++t) {  // none in surface mode
     const Vec3 a = g.Y.row(T(t, 0)), b = g.Y.row(T(t, 1)), cc = g.Y.row(T(t, 2)), d = g.Y.row(T(t, 3));
     g.turned_over += !((b - a).dot((cc - a).cross(d - a)) > 0);
   }

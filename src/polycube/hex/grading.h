@@ -59,7 +59,8 @@ struct Grading {
 
 /// rest/T: the tet mesh; X: its exact polycube; B/labels: the boundary triangles and their labels
 /// (code 0..5, axis = label / 2); s: cells per polycube unit of the grid (bins are a quarter cell).
-/// The warp keeps the polycube's volume (one scale factor for the three axes).
+/// The warp keeps the polycube's volume (one scale factor for the three axes); with no tets (T
+/// empty: a surface polycube, B its triangles), its area.
 Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
                        const std::vector<int>& labels, double s, const GradingOptions& opt);
 

@@ -926,7 +926,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         write_quads(qr, ex.charts.corners, sq,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
-                     {"thin_steps", opt.quad.merge_thin_steps}},
+                     {"thin_steps", opt.quad.merge_thin_steps}, {"grading", opt.quad.grading.strength},
+                     {"grading_density_min", qr.grading_min}, {"grading_density_max", qr.grading_max}},
                     json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices}});
       }
       if (opt.until == Stage::Quad && !opt.surface) {

@@ -12,6 +12,7 @@
 #include "polycube/core/types.h"
 #include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/surface_fit.h"
+#include "polycube/hex/grading.h"
 #include "polycube/hex/quality.h"
 
 namespace polycube::quad {
@@ -32,6 +33,9 @@ struct QuadOptions {
   /// of a cell wide (cad/block at 2000 quads: 194 quads with an edge ratio over 100, up to 1e6).
   /// Closed surfaces only; 0 = every plane keeps a cell.
   double merge_thin_steps = 0.01;
+  /// Surface mode: rows of quads denser where the map curves more, as hex::HexOptions::grading
+  /// (hex/grading.h; the area kept instead of the volume). Off by default (strength 0).
+  hex::GradingOptions grading{0.0};
   double sharp_angle_deg = 30;   ///< dihedral angle above which an input edge is a sharp feature
   /// Move paths of quad edges onto the sharp edges no quad edge follows (creases the polycube has no
   /// edge along), before smoothing (geometry/feature_capture.h).
@@ -80,6 +84,7 @@ struct QuadResult {
   // Surface mode (quad_mesh_from_surface_polycube):
   double cells_per_unit = 0;              ///< grid cells per length unit of the polycube
   std::array<int, 3> planes{};            ///< distinct integer planes per axis
+  std::array<double, 3> grading_min{}, grading_max{};  ///< graded rows: extreme densities per axis (0: uniform)
   int merged_planes = 0;                  ///< planes of thin steps sharing their integer with the one below (QuadOptions::merge_thin_steps)
   std::array<int, 3> cells{};             ///< grid extent per axis
   int border_vertices = 0;                ///< vertices on the border of an open surface (kept on it)

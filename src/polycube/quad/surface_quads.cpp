@@ -18,7 +18,10 @@ struct AxisMap {
   std::vector<double> h;
   std::vector<int> n;
   double s = 1;
-  double operator()(double x) const {
+  const hex::AxisWarp* warp = nullptr;  ///< graded grid: h are warped heights, x is warped first
+  double operator()(double x) const { return warp ? snapped((*warp)(x)) : snapped(x); }
+  double inverse(double y) const { return warp ? warp->inverse(unsnapped(y)) : unsnapped(y); }
+  double snapped(double x) const {
     if (h.empty()) return s * x;
     if (x <= h.front()) return n.front() + s * (x - h.front());
     if (x >= h.back()) return n.back() + s * (x - h.back());
@@ -28,7 +31,7 @@ struct AxisMap {
   }
   /// The inverse (n is non-decreasing; where merged heights share an integer, it gives the highest
   /// of them, the map being constant between them).
-  double inverse(double y) const {
+  double unsnapped(double y) const {
     if (h.empty()) return y / s;
     if (y <= n.front()) return h.front() + (y - n.front()) / s;
     if (y >= n.back()) return h.back() + (y - n.back()) / s;
@@ -60,12 +63,27 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       for (int m = 0; m < 3; ++m)
         if (X(e[0], m) == X(e[1], m)) raw[m].push_back(X(e[0], m));
   std::array<AxisMap, 3> map;
+  // Graded rows (QuadOptions::grading): heights are snapped in the warped polycube.
+  hex::Grading graded;
+  if (opt.grading.strength > 0) {
+    hex::GradingOptions go = opt.grading;
+    go.sharp_angle_deg = opt.sharp_angle_deg;
+    graded = hex::grade_polycube(rest, MatX4i(0, 4), X, F, labels, cells_per_unit, go);
+    for (int k = 0; k < 3; ++k) {
+      map[k].warp = &graded.warp[k];
+      r.grading_min[k] = graded.min_slope[k];
+      r.grading_max[k] = graded.max_slope[k];
+    }
+  }
   for (int k = 0; k < 3; ++k) {
     std::sort(raw[k].begin(), raw[k].end());
     std::vector<double> h;
     for (double x : raw[k])
       if (h.empty() || x - h.back() > tol) h.push_back(x);
-    map[k].h = h;
+    std::vector<double> hw = h;  // in the warped polycube
+    if (map[k].warp)
+      for (double& x : hw) x = (*map[k].warp)(x);
+    map[k].h = hw;
     map[k].s = cells_per_unit;
     r.planes[k] = static_cast<int>(h.size());
     // Thin steps (QuadOptions::merge_thin_steps): runs of consecutive planes spanning less than
@@ -76,7 +94,7 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     const std::vector<std::vector<int>> facing =
         merge > 0 ? hex::facing_planes(X, F, labels, k, h, tol) : std::vector<std::vector<int>>(h.size());
     std::vector<double> hg;
-    const std::vector<int> group = hex::thin_step_groups(h, cells_per_unit, merge, facing, hg);
+    const std::vector<int> group = hex::thin_step_groups(hw, cells_per_unit, merge, facing, hg);
     r.merged_planes += static_cast<int>(h.size() - hg.size());
     const std::vector<int> ng = hex::snap_heights(hg, cells_per_unit);
     map[k].n.resize(h.size());
