@@ -55,12 +55,17 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
   const Vec3 lo = X.colwise().minCoeff().transpose(), hi = X.colwise().maxCoeff().transpose();
   const double width = 0.25 / s;
 
-  // Stretch of the map along axis k on each boundary triangle of a chart of another axis: the
-  // triangle's 2D Jacobian (polycube plane -> input), column k. Smoothed at the vertices (mean over
-  // the incident triangles, weighted by polycube area), so that one crushed triangle does not count.
+  if (opt.measure != "chord" && opt.measure != "stretch")
+    throw Error(ErrorKind::Usage, "unknown grading measure '" + opt.measure + "' (chord or stretch)");
+  // The measure along axis k on each boundary triangle of a chart of another axis, from the
+  // triangle's 2D Jacobian J (polycube plane -> input): "stretch" |J e_k|; "chord" the square root
+  // of the map's second derivative along k normal to the surface. Smoothed at the vertices (mean
+  // over the incident triangles, weighted by polycube area), so that one crushed triangle does not
+  // count.
   const int nv = static_cast<int>(X.rows());
   // Corner normals of the input surface, smooth across edges and split across sharp ones: the mean
-  // of the (area-weighted) normals of the triangles around the corner within 30 degrees of this one.
+  // of the (area-weighted) normals of the triangles around the corner within sharp_angle_deg of
+  // this one.
   std::vector<Vec3> fn(B.rows());
   std::vector<std::vector<int>> vf(nv);
   for (int f = 0; f < B.rows(); ++f) {
