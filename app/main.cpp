@@ -258,6 +258,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::IsMember({"chord", "stretch"}));
   app.add_option("--grading-max", hx.grading.max_ratio, "Hex mesh: the grading's largest density ratio")
       ->capture_default_str()->check(CLI::Range(1.0, 100.0));
+  app.add_flag("--hex-creases,!--no-hex-creases", hx.capture_creases,
+               "Hex mesh: a variant with paths of boundary vertices moved onto the creases no boundary edge "
+               "follows, kept when closer to the input with no worse a worst hex (under 0.3)");
   app.add_option("--hex-smooth", hx.smooth_iterations, "Hex mesh: smoothing sweeps (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
   int fit_rounds = hx.fit.rounds;

@@ -654,10 +654,14 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   // The graded grid (default) and the paper's uniform one (--grading 0), as reported.
   EXPECT_DOUBLE_EQ(b["hex"]["options"]["grading"].get<double>(), 0.5);
   EXPECT_EQ(b["hex"]["options"]["grading_measure"], "chord");
-  r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --grading 0 -q -o " + dir + "/bu");
+  r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --grading 0 --hex-creases -q -o " +
+              dir + "/bu");
   ASSERT_EQ(r.code, 0) << r.output;
   json bu = report(dir + "/bu");
   EXPECT_DOUBLE_EQ(bu["hex"]["options"]["grading"].get<double>(), 0.0);
+  EXPECT_FALSE(b["hex"]["options"]["capture_creases"].get<bool>());
+  EXPECT_TRUE(bu["hex"]["options"]["capture_creases"].get<bool>());
+  EXPECT_GE(bu["hex"]["creases"]["runs"].get<int>(), bu["hex"]["creases"]["captured"].get<int>());
   for (int k = 0; k < 3; ++k) {
     EXPECT_EQ(bu["hex"]["grid"]["grading_density_max"][k].get<double>(), 0.0);
     EXPECT_GT(b["hex"]["grid"]["grading_density_min"][k].get<double>(), 0.0);

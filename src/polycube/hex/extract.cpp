@@ -9,6 +9,7 @@
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
 #include "polycube/geometry/closest_point.h"
+#include "polycube/geometry/feature_capture.h"
 #include "polycube/geometry/features.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/grading.h"
@@ -40,6 +41,9 @@ double tet_volume(const MatX3d& X, const MatX4i& T, int t) {
   const Vec3 a = X.row(T(t, 0)), b = X.row(T(t, 1)), c = X.row(T(t, 2)), d = X.row(T(t, 3));
   return (b - a).dot((c - a).cross(d - a)) / 6;
 }
+
+// Crease runs are kept when their hexes are at least this good (or as good as the worst elsewhere).
+constexpr double kCaptureFloor = 0.3;
 
 struct GridKeyHash {
   size_t operator()(const std::array<int, 3>& k) const {
@@ -271,22 +275,42 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     r.sharp_vertices += feature[v] || slide[v][0] >= 0;
   }
 
+  // Creases of the target no boundary quad edge follows (a chamfer round a hole, a crease fading
+  // out inside a face): a variant moves the nearest path of boundary vertices onto each and keeps
+  // it there (HexOptions::capture_creases; judged below).
+  MatX3d V_cap;
+  std::vector<geometry::FeatureCaptureStats::Run> runs;
+  if (tree && opt.capture_creases) {
+    const std::vector<unsigned char> creases =
+        geometry::crease_edges(*target, opt.sharp_angle_deg, opt.capture_angle_deg);
+    std::vector<char> locked(nv, 0), snapped;
+    for (int v = 0; v < nv; ++v) locked[v] = feature[v] || slide[v][0] >= 0;
+    V_cap = V;
+    geometry::FeatureCaptureStats fc = geometry::capture_sharp_edges(V_cap, Q, *target, creases, locked, snapped);
+    r.crease_runs = fc.runs;
+    runs = std::move(fc.captured_runs);
+  }
+
   // ---- pillowing and optimization -----------------------------------------------------------
   struct Candidate {
     MatX3d V;
     MatX8i H;
     HexQuality extracted, quality;
-    int pillow_hexes = 0, moves = 0;
+    int pillow_hexes = 0, moves = 0, captured = 0;
     geometry::SurfaceFitStats fit;
     std::vector<char> fixed;
     std::vector<std::array<int, 2>> slide;
   };
   // Runs on its own thread when both variants are tried: reports progress only when `report`.
-  auto finish = [&](bool pillow, bool report) {
+  auto finish = [&](bool pillow, bool report, bool capture = false) {
+    const MatX3d& VS = capture ? V_cap : V;  // the grid vertices (with the crease runs moved)
     Candidate c;
-    c.V = V;
+    c.V = VS;
     c.H = H;
     std::vector<char> fixed = feature;
+    if (capture)
+      for (const auto& run : runs)
+        for (int v : run.vertices) fixed[v] = 1;
     std::vector<std::array<int, 2>> sl = slide;
     if (pillow) {
       // Inner copies: each boundary vertex moves a fraction of the way to the mean centroid of its
@@ -296,7 +320,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       std::vector<int> count(nv, 0);
       for (int h = 0; h < H.rows(); ++h) {
         Vec3 m = Vec3::Zero();
-        for (int i = 0; i < 8; ++i) m += V.row(H(h, i)).transpose();
+        for (int i = 0; i < 8; ++i) m += VS.row(H(h, i)).transpose();
         m /= 8;
         for (int i = 0; i < 8; ++i) {
           centre[H(h, i)] += m;
@@ -310,7 +334,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       c.V.conservativeResize(next, 3);
       for (int v = 0; v < nv; ++v)
         if (inner[v] >= 0)
-          c.V.row(inner[v]) = V.row(v) + opt.pillow_thickness * (centre[v] / count[v] - V.row(v).transpose()).transpose();
+          c.V.row(inner[v]) = VS.row(v) + opt.pillow_thickness * (centre[v] / count[v] - VS.row(v).transpose()).transpose();
       c.H.resize(H.rows() + Q.rows(), 8);
       for (int h = 0; h < H.rows(); ++h)
         for (int i = 0; i < 8; ++i) c.H(h, i) = inner[H(h, i)] >= 0 ? inner[H(h, i)] : H(h, i);
@@ -331,6 +355,42 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                                             opt.smooth_iterations, opt.optimize_below,
                                             report ? hooks : quiet);
     c.moves = os.laplacian_moves + os.optimized_moves;
+    if (capture) {
+      // Runs whose hexes stay under min(0.3, the worst elsewhere) are undone (their vertices back
+      // where the extraction put them, free again), then the mesh is optimized again.
+      std::vector<std::vector<int>> vh(c.V.rows());
+      for (int h = 0; h < c.H.rows(); ++h)
+        for (int i = 0; i < 8; ++i) vh[c.H(h, i)].push_back(h);
+      std::vector<char> in_run(c.V.rows(), 0);
+      for (const auto& run : runs)
+        for (int v : run.vertices) in_run[v] = 1;
+      double elsewhere = 1;
+      for (int h = 0; h < c.H.rows(); ++h) {
+        bool touches = false;
+        for (int i = 0; i < 8; ++i) touches = touches || in_run[c.H(h, i)];
+        if (!touches) elsewhere = std::min(elsewhere, scaled_jacobian(c.V, c.H, h));
+      }
+      int undone = 0;
+      for (const auto& run : runs) {
+        double m = 1;
+        for (int v : run.vertices)
+          for (int h : vh[v]) m = std::min(m, scaled_jacobian(c.V, c.H, h));
+        if (m >= std::min(kCaptureFloor, elsewhere)) {
+          ++c.captured;
+          continue;
+        }
+        ++undone;
+        for (int v : run.vertices) {
+          c.V.row(v) = V.row(v);
+          fixed[v] = feature[v];
+        }
+      }
+      if (undone > 0) {
+        const OptimizeStats again = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), patch.empty() ? nullptr : &patch,
+                                                   opt.smooth_iterations, opt.optimize_below, quiet);
+        c.moves += again.laplacian_moves + again.optimized_moves;
+      }
+    }
     if (tree && opt.fit.rounds > 0) {
       const MatX4i Qb = boundary_quads(c.H);
       const int n = static_cast<int>(c.V.rows());
@@ -386,6 +446,24 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       have = true;
     }
   }
+  if (!runs.empty()) {
+    // The crease variant of the chosen one, kept when its boundary is closer to the target (the
+    // two-sided Hausdorff distance, as the report measures it) and its worst hex is at least
+    // min(0.3, the worst without); a worse worst hex only for a smaller distance.
+    Candidate cap = finish(best.pillow_hexes > 0, false, true);
+    const auto distance = [&](const Candidate& c) {
+      return hausdorff(c.V, triangulate_quads(boundary_quads(c.H)), target->V, target->F).max;
+    };
+    const double d_base = distance(best), d_cap = cap.captured > 0 ? distance(cap) : 1e300;
+    const bool keep = cap.captured > 0 && d_cap < d_base &&
+                      cap.quality.sj_min >= std::min(kCaptureFloor, best.quality.sj_min) - 1e-9;
+    hooks.debug("hex crease capture: " + std::to_string(runs.size()) + " runs, " + std::to_string(cap.captured) +
+                " kept after the optimization; Hausdorff " + std::to_string(d_cap) + " (" + std::to_string(d_base) +
+                " without), worst hex " + std::to_string(cap.quality.sj_min) + " (" +
+                std::to_string(best.quality.sj_min) + " without): " + (keep ? "kept" : "not kept"));
+    if (keep) best = std::move(cap);
+  }
+  r.crease_captured = best.captured;
   V = std::move(best.V);
   H = std::move(best.H);
   r.pillow_hexes = best.pillow_hexes;

@@ -68,6 +68,14 @@ struct HexOptions {
   /// merged); spot: 3 merged, mean and Hausdorff a little better; rod, fandisk: no step that thin
   /// (rod at 0.25: 0.673 against 0.702). 0 = every step keeps a cell.
   double merge_thin_steps = 0.01;
+  /// Creases of the target (chains of edges sharper than sharp_angle_deg with one edge sharper
+  /// than capture_angle_deg) that no boundary quad edge follows: a variant of the chosen mesh moves
+  /// the nearest path of boundary vertices onto each and keeps it there (geometry/feature_capture.h);
+  /// a run whose hexes stay under min(0.3, the worst elsewhere) is undone, and the variant is kept
+  /// when its boundary is closer to the target and its worst hex at least min(0.3, the worst
+  /// without). Costs one more optimization when a crease is not followed.
+  bool capture_creases = false;
+  double capture_angle_deg = 45;
   /// Graded grid (grading.h): sheets of hexes denser where the polycube map stretches the boundary.
   GradingOptions grading;
   /// After the optimization, boundary vertices off features slide on the target so that it comes
@@ -91,6 +99,7 @@ struct HexResult {
   double min_slab_ratio = 0;      ///< thinnest slab between planes, in cells, over the cell it got (see snap.h)
   int grid_hexes = 0;             ///< hexes of the grid (before pillowing)
   int pillow_hexes = 0;           ///< hexes of the boundary layer (0: not pillowed)
+  int crease_runs = 0, crease_captured = 0;  ///< creases no boundary edge followed; runs kept captured (capture_creases)
   int sharp_vertices = 0;         ///< grid vertices kept on sharp features of the target (fixed or sliding)
   struct Tried {
     std::string variant;          ///< "no_pillow" or "pillow"

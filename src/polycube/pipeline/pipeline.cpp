@@ -890,6 +890,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["pillow_hexes"] = hr.pillow_hexes;
         hj["retries"] = retries;
         hj["sharp_vertices"] = hr.sharp_vertices;
+        hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}};
         hj["variants"] = json::array();
         for (const auto& t : hr.tried)
           hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});
@@ -901,6 +902,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
                          {"thin_steps", opt.hex.merge_thin_steps}, {"fit_rounds", opt.hex.fit.rounds},
                          {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
+                         {"capture_creases", opt.hex.capture_creases},
                          {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
                          {"grading_max", opt.hex.grading.max_ratio}};
         hj["seconds"] = sh.seconds();
