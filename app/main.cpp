@@ -251,8 +251,8 @@ int main(int argc, char** argv) {
                  "0 = every step keeps a cell")
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
   app.add_option("--grading", hx.grading.strength,
-                 "Hex mesh: sheets of hexes denser where the polycube map stretches the boundary (exponent on "
-                 "the stretch: 0 = uniform grid, as the paper's; 1 = full)")
+                 "Hex mesh (and surface-mode quads when given): sheets of hexes denser where cells would cut the "
+                 "curved surface more (exponent on the measure: 0 = uniform grid, as the paper's; 1 = full)")
       ->capture_default_str()->check(CLI::Range(0.0, 2.0));
   app.add_option("--grading-measure", hx.grading.measure, "Hex mesh: what the grading follows: chord or stretch")
       ->capture_default_str()->check(CLI::IsMember({"chord", "stretch"}));

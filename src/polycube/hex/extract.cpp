@@ -91,17 +91,16 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     GradingOptions go = opt.grading;
     go.sharp_angle_deg = opt.sharp_angle_deg;
     graded = grade_polycube(rest, T, X_in, B, labels, s, go);
+    std::string densities;
     for (int k = 0; k < 3; ++k) {
       r.grading_max_slope[k] = graded.max_slope[k];
       r.grading_min_slope[k] = graded.min_slope[k];
+      densities += (k ? ", " : "") + std::to_string(graded.min_slope[k]) + "-" + std::to_string(graded.max_slope[k]);
     }
+    hooks.debug("grading: sheet density per axis " + densities + "; " + std::to_string(graded.turned_over) +
+                " tets turned over, " + std::to_string(graded.left_inverted) + " left after untangling");
   }
   const MatX3d& X = grade ? graded.Y : X_in;
-  if (grade) {
-    hooks.debug("grading: sheet density per axis " + std::to_string(graded.min_slope[0]) + "-" + std::to_string(graded.max_slope[0]) + ", " +
-                std::to_string(graded.min_slope[1]) + "-" + std::to_string(graded.max_slope[1]) + ", " + std::to_string(graded.min_slope[2]) +
-                "-" + std::to_string(graded.max_slope[2]) + "; " + std::to_string(graded.turned_over) + " tets turned over, " + std::to_string(graded.left_inverted) + " left after untangling");
-  }
   // Snapping: planes that face each other keep their order and a cell between them, the others may
   // share an integer; the polycube deformed to the snapped planes (Y, grid units) must keep every
   // tet positive, else the plain sorted snapping is tried, and last the per-axis piecewise-linear

@@ -76,7 +76,9 @@ struct HexOptions {
   /// without). Costs one more optimization when a crease is not followed.
   bool capture_creases = false;
   double capture_angle_deg = 45;
-  /// Graded grid (grading.h): sheets of hexes denser where the polycube map stretches the boundary.
+  /// Graded grid (grading.h): sheets of hexes denser where cells would cut the curved surface more
+  /// (measure "chord", default) or where the map stretches the boundary ("stretch"); strength 0 =
+  /// the paper's uniform grid.
   GradingOptions grading;
   /// After the optimization, boundary vertices off features slide on the target so that it comes
   /// closer to the hex boundary, no hex around a moved vertex dropping below min(floor, its worst

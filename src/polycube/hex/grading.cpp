@@ -5,6 +5,7 @@
 
 #include "polycube/chart/realize.h"
 #include "polycube/core/error.h"
+#include "polycube/validate/tetmesh.h"
 
 namespace polycube::hex {
 
@@ -27,12 +28,13 @@ double AxisWarp::inverse(double y) const {
 
 namespace {
 
+double volume_of_tet(const MatX3d& X, const MatX4i& T, int t) {
+  return tet_volume(X.row(T(t, 0)), X.row(T(t, 1)), X.row(T(t, 2)), X.row(T(t, 3)));
+}
+
 double volume_of(const MatX3d& X, const MatX4i& T) {
   double v = 0;
-  for (int t = 0; t < T.rows(); ++t) {
-    const Vec3 a = X.row(T(t, 0)), b = X.row(T(t, 1)), c = X.row(T(t, 2)), d = X.row(T(t, 3));
-    v += (b - a).dot((c - a).cross(d - a)) / 6;
-  }
+  for (int t = 0; t < T.rows(); ++t) v += volume_of_tet(X, T, t);
   return v;
 }
 
@@ -66,19 +68,20 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
   // Corner normals of the input surface, smooth across edges and split across sharp ones: the mean
   // of the (area-weighted) normals of the triangles around the corner within sharp_angle_deg of
   // this one.
-  std::vector<Vec3> fn(B.rows());
+  std::vector<Vec3> fn(B.rows()), un(B.rows());  // area-weighted and unit normals
   std::vector<std::vector<int>> vf(nv);
   for (int f = 0; f < B.rows(); ++f) {
     const Vec3 r0 = rest.row(B(f, 0)), r1 = rest.row(B(f, 1)), r2 = rest.row(B(f, 2));
     fn[f] = (r1 - r0).cross(r2 - r0);
+    un[f] = fn[f].normalized();
     for (int c = 0; c < 3; ++c) vf[B(f, c)].push_back(f);
   }
   const bool chord = opt.measure == "chord";
+  const double smooth_cos = std::cos(opt.sharp_angle_deg * M_PI / 180);
   auto corner_normal = [&](int f, int v) {
-    const Vec3 nf = fn[f].normalized();
     Vec3 n = Vec3::Zero();
     for (int h : vf[v])
-      if (fn[h].normalized().dot(nf) > std::cos(opt.sharp_angle_deg * M_PI / 180)) n += fn[h];
+      if (un[h].dot(un[f]) > smooth_cos) n += fn[h];
     return n.normalized();
   };
   std::array<std::vector<double>, 3> vsum, vw;
@@ -199,15 +202,14 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
   }
   // A sliver straddling a change of slope may turn over: untangle it locally, the vertices of each
   // chart kept on their plane (the snapping's harmonic displacement needs positive tets).
-  std::array<std::vector<char>, 3> fixed;
-  for (int k = 0; k < 3; ++k) fixed[k].assign(nv, 0);
-  for (int f = 0; f < B.rows(); ++f)
-    for (int c = 0; c < 3; ++c) fixed[labels[f] / 2][B(f, c)] = 1;
-  for (int t = 0; t < T.rows(); ++t) {  // none in surface mode
-    const Vec3 a = g.Y.row(T(t, 0)), b = g.Y.row(T(t, 1)), cc = g.Y.row(T(t, 2)), d = g.Y.row(T(t, 3));
-    g.turned_over += !((b - a).dot((cc - a).cross(d - a)) > 0);
+  for (int t = 0; t < T.rows(); ++t) g.turned_over += !(volume_of_tet(g.Y, T, t) > 0);  // no tets in surface mode
+  if (g.turned_over > 0) {
+    std::array<std::vector<char>, 3> fixed;
+    for (int k = 0; k < 3; ++k) fixed[k].assign(nv, 0);
+    for (int f = 0; f < B.rows(); ++f)
+      for (int c = 0; c < 3; ++c) fixed[labels[f] / 2][B(f, c)] = 1;
+    chart::untangle_tets_locally(X, T, fixed, g.Y, g.left_inverted);
   }
-  if (g.turned_over > 0) chart::untangle_tets_locally(X, T, fixed, g.Y, g.left_inverted);
   return g;
 }
 
