@@ -10,6 +10,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <set>
 #include <sstream>
 #include <memory>
 #include <mutex>
@@ -30,7 +31,36 @@ namespace polycube::chart {
 namespace {
 
 using SpMat = Eigen::SparseMatrix<double>;
-using Cholmod = Eigen::CholmodDecomposition<SpMat, Eigen::Lower>;
+// Eigen's CHOLMOD wrapper, with a symbolic analysis from a given fill-reducing ordering.
+class Cholmod : public Eigen::CholmodDecomposition<SpMat, Eigen::Lower> {
+ public:
+  /// As analyzePattern, but with `perm` (new -> old) as the ordering (try_amd: or AMD's, the
+  /// better by CHOLMOD's measure).
+  void analyze_pattern_given(const SpMat& A, std::vector<int>& perm, bool try_amd = false) {
+    if (m_cholmodFactor) {
+      cholmod_free_factor(&m_cholmodFactor, &this->cholmod());
+      m_cholmodFactor = nullptr;
+    }
+    cholmod_sparse view = Eigen::viewAsCholmod(A.selfadjointView<Eigen::Lower>());
+    const int nmethods = this->cholmod().nmethods;
+    const int second = this->cholmod().method[1].ordering;
+    this->cholmod().nmethods = try_amd ? 2 : 1;  // method[0]: the given ordering
+    this->cholmod().method[1].ordering = CHOLMOD_AMD;
+    m_cholmodFactor = cholmod_analyze_p(&view, perm.data(), nullptr, 0, &this->cholmod());
+    this->cholmod().nmethods = nmethods;
+    this->cholmod().method[1].ordering = second;
+    m_isInitialized = true;
+    m_info = m_cholmodFactor ? Eigen::Success : Eigen::NumericalIssue;
+    m_analysisIsOk = m_cholmodFactor != nullptr;
+    m_factorizationIsOk = false;
+  }
+  /// The fill-reducing ordering of the last analysis (new -> old), empty without one.
+  std::vector<int> ordering() const {
+    if (!m_cholmodFactor || !m_cholmodFactor->Perm) return {};
+    const int* p = static_cast<const int*>(m_cholmodFactor->Perm);
+    return std::vector<int>(p, p + m_cholmodFactor->n);
+  }
+};
 
 
 std::unique_ptr<Cholmod> make_solver() {
@@ -60,6 +90,37 @@ void factorize(Cholmod& s, const SpMat& A) {
 void analyze_and_factorize(Cholmod& s, const SpMat& A) {
   analyze(s, A);
   factorize(s, A);
+}
+// The same from a given ordering (no ordering is computed: no lock needed).
+void analyze_and_factorize(Cholmod& s, const SpMat& A, std::vector<int>& perm, bool try_amd = false) {
+  {
+    const SerialOpenMP serial_openmp;
+    s.analyze_pattern_given(A, perm, try_amd);
+  }
+  factorize(s, A);
+}
+
+// The unknowns 0..count-1 of a system over the mesh's vertices, in the order of their vertices
+// in `vertex_order` (a fill-reducing ordering of the vertex graph); unknown(v, k) for the
+// coordinates k < axes of vertex v (< 0: none). Unknowns shared by many vertices (plane
+// heights: dense rows), marked by shared(u), go last, as a minimum-degree ordering puts them.
+template <class Unknown, class Shared>
+std::vector<int> restricted_order(const std::vector<int>& vertex_order, int axes, int count, Unknown unknown,
+                                  Shared shared) {
+  std::vector<int> perm;
+  perm.reserve(count);
+  std::vector<char> seen(count, 0);
+  for (int v : vertex_order)
+    for (int k = 0; k < axes; ++k) {
+      const int u = unknown(v, k);
+      if (u >= 0 && !seen[u] && !shared(u)) {
+        seen[u] = 1;
+        perm.push_back(u);
+      }
+    }
+  for (int u = 0; u < count; ++u)
+    if (!seen[u]) perm.push_back(u);
+  return perm;
 }
 
 // Volume ratio J = det(F) of tet t (rest -> X) and its gradient over the tet's 12 coordinates.
@@ -326,6 +387,26 @@ class Realizer {
     }
     K_.resize(n, n);
     K_.setFromTriplets(trip.begin(), trip.end());
+    // One fill-reducing ordering of the vertices for the coupled steps (see coupled_step), whose
+    // own orderings (METIS on the larger meshes) were most of the analyses' time, 39 s of a 95 s
+    // extraction (rocker, 155k tets, 99 analyses).
+    {
+      Cholmod ordering;
+      ordering.cholmod().print = 0;
+      // Both AMD and METIS, the better kept (by default CHOLMOD tries METIS only where AMD fills
+      // much; on fandisk's vertices AMD's ordering restricted to the per-axis systems had 1.8x
+      // the flops of METIS's).
+      ordering.cholmod().nmethods = 2;
+      ordering.cholmod().method[0].ordering = CHOLMOD_AMD;
+      ordering.cholmod().method[1].ordering = CHOLMOD_METIS;
+      const SpMat lower = K_.triangularView<Eigen::Lower>();
+      analyze(ordering, lower);
+      vertex_order_ = ordering.ordering();
+      if (static_cast<int>(vertex_order_.size()) != n) {
+        vertex_order_.resize(n);
+        for (int v = 0; v < n; ++v) vertex_order_[v] = v;
+      }
+    }
     // Translations along k are free in reduced mode: a tiny diagonal makes the system definite.
     const double reg = 1e-10 * diag / std::max(1, n);
     for (int k = 0; k < 3; ++k) {
@@ -344,6 +425,9 @@ class Realizer {
         Kk.setFromTriplets(tk.begin(), tk.end());
         auto& solver = m == Mode::Reduced ? solver_[k] : pinned_solver_[k];
         solver = make_solver();
+        // (The vertex ordering below, restricted to these unknowns, halved their flops on rocker
+        // but changed the round-off enough for spot at 20k tets to end unrealized: CHOLMOD's own
+        // ordering stays here.)
         if (nv > 0) analyze_and_factorize(*solver, Kk);
         ok_ = ok_ && (nv == 0 || solver->info() == Eigen::Success);
       }
@@ -433,6 +517,13 @@ class Realizer {
       inverted = count_inverted(X, T_, arap_rest_);
     }
     return it;
+  }
+
+  // The first inverted (or flat) tet of X, -1 if none.
+  int first_inverted_tet(const MatX3d& X) const {
+    for (int t = 0; t < T_.rows(); ++t)
+      if (!(volume_ratio(X, T_, arap_rest_, t) > 0)) return t;
+    return -1;
   }
 
   // The first inverted tets of X, named with the planes of their vertices, e.g. "tet 7 (3:X-- 9:--Z
@@ -665,7 +756,16 @@ class Realizer {
       for (int k = 0; k < 3; ++k)
         if (dof(v, k) >= 0) rhs[dof(v, k)] -= g[3 * v + k];
     auto solver = make_solver();
-    analyze_and_factorize(*solver, H);
+    // Ordering: the vertex ordering with each vertex's coordinates together, or AMD's of this
+    // pattern, whichever CHOLMOD finds better. Where few tets have barrier curvature the axes
+    // barely couple and AMD wins (fandisk: 0.6 Gflop against 2.8); where many do, AMD's ordering
+    // is poor (rocker, 155k tets: 3x the flops of METIS's) and METIS afresh cost about 1 s per
+    // step (the vertex ordering: 1.6x METIS's flops, no ordering time).
+    std::vector<int> perm = restricted_order(vertex_order_, 3, offset[3], dof, [&](int u) {
+      const int k = u >= offset[2] ? 2 : u >= offset[1] ? 1 : 0;
+      return mode == Mode::Reduced && u - offset[k] >= red_.nfree[k];
+    });
+    analyze_and_factorize(*solver, H, perm, true);
     MatX3d d = MatX3d::Zero(n, 3);
     if (solver->info() != Eigen::Success) return d;
     const Eigen::VectorXd x = solver->solve(rhs);
@@ -726,6 +826,15 @@ class Realizer {
         if (planes_.of_vertex[k][v] >= 0) gap(v, k) = planes_.height[k][planes_.of_vertex[k][v]] - X(v, k);
     double t = 0, dt = 1.0;
     steps = 0;
+    // A tet that flattens as t -> 1 (its shape at the planes is flat whatever the free
+    // coordinates do) lets each accepted step cover only a fixed fraction of the remaining way
+    // (rocker, 155k tets: about 1/7, from t = 0.6 on): the run creeps to the step limit and
+    // stalls at t = 0.99, some 20 accepted steps of 2 s each after the outcome was clear. Past
+    // kStallFrom, a failed step whose first inverted tet already blocked one there counts as a
+    // repeat; opt_.stall_repeats repeats end the run as stalled.
+    constexpr double kStallFrom = 0.75;
+    std::set<int> blockers;
+    int repeated_blocks = 0;
     // Open up nearly flat tets of the start first (the unknowns only): any step would invert them.
     minimize(X, Mode::Pinned, 5);
     while (t < 1) {
@@ -736,9 +845,11 @@ class Realizer {
           for (int v = 0; v < n; ++v)
             if (planes_.of_vertex[k][v] >= 0) Xt(v, k) = planes_.height[k][planes_.of_vertex[k][v]];
       ++steps;
-      if (count_inverted(Xt, T_, arap_rest_) > 0 || steps > max_steps) {  // a step must keep every tet positive
+      const int first_inverted = first_inverted_tet(Xt);
+      if (first_inverted >= 0 || steps > max_steps) {  // a step must keep every tet positive
         dt *= 0.5;
-        if (dt < 1e-4 || steps > max_steps) {
+        if (first_inverted >= 0 && t >= kStallFrom && !blockers.insert(first_inverted).second) ++repeated_blocks;
+        if (dt < 1e-4 || steps > max_steps || (opt_.stall_repeats > 0 && repeated_blocks >= opt_.stall_repeats)) {
           // Name the tets that block the path, for the failure message.
           int count = 0;
           const std::string who = inverted_tets(Xt, &count);
@@ -958,6 +1069,7 @@ class Realizer {
   Reduced red_;
   SpMat K_;
   std::unique_ptr<Cholmod> solver_[3], pinned_solver_[3];
+  std::vector<int> vertex_order_;  // fill-reducing ordering of the vertices (new -> old)
   bool ok_ = true;
   double tau_ = 0;
   mutable std::string blocked_;
