@@ -208,6 +208,11 @@ int main(int argc, char** argv) {
                  "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "
                  "(each) before landing on the planes and untangling")
       ->capture_default_str()->check(CLI::Range(0, 6));
+  app.add_option("--stall-repeats", rz.stall_repeats,
+                 "Polycube realization: past t = 0.75 of the continuation, this many failed steps blocked again "
+                 "by tets that already blocked one end it as stalled (such a run creeps towards t = 1 and "
+                 "reaches its 60-step limit anyway); 0 = off")
+      ->capture_default_str()->check(CLI::Range(0, 1000));
   app.add_flag("--penalty-path,!--no-penalty-path", rz.penalty_path,
                "Polycube realization: when the continuation start stalls, first try the penalty path (plane "
                "heights free, gaps penalized ever more strongly, every tet kept positive) before landing on the "

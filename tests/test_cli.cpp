@@ -263,12 +263,14 @@ TEST(Cli, CollapsedRatioOption) {
 TEST(Cli, RealizationOptionsReachTheReport) {
   // The realization's options are reported (for reproducing a run); out of range: exit 2.
   std::string out = temp_dir("realize_options");
-  RunResult r = run_cli("--example box_hole --until polycube --untangle-patience 3 --continuation-retries 1 -q -o " +
-                        out);
+  RunResult r = run_cli(
+      "--example box_hole --until polycube --untangle-patience 3 --continuation-retries 1 --stall-repeats 5 -q -o " +
+      out);
   ASSERT_EQ(r.code, 0) << r.output;
   json j = report(out);
   EXPECT_EQ(j["polycube"]["realize_options"]["untangle_patience"].get<int>(), 3);
   EXPECT_EQ(j["polycube"]["realize_options"]["continuation_retries"].get<int>(), 1);
+  EXPECT_EQ(j["polycube"]["realize_options"]["stall_repeats"].get<int>(), 5);
   EXPECT_EQ(j["polycube"]["realize_options"]["start"].get<std::string>(), "auto");
   EXPECT_FALSE(j["polycube"]["realize_options"]["penalty_path"].get<bool>());
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
@@ -283,6 +285,7 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(run_cli("--example box_hole --until polycube --realize-start penalties -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --untangle-patience 0 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --stall-repeats -1 -q -o " + out).code, 2);
   // Surface mode's relaxation: reported, and the map's worst isometric distortion no higher.
   r = run_cli("--example box_hole --surface --until polycube -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;

@@ -301,6 +301,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0, cg_failures = 0, cg_failed_iterations = 0;
   bool factor_valid = false, stalled = false;
+  int last_cg = 0, prev_cg = 0;
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   const double sqp_tolerance = opt.sqp_tolerance_for(p.surface);
@@ -347,17 +348,26 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       // preconditioner for conjugate gradients, and factorize anew only when that gets slow.
       Eigen::VectorXd Hg, Hc;  // H^-1 g and H^-1 grad C
       bool solved = false;
+      // On large meshes a factorization costs many CG iterations (O(n^2) against O(n^4/3) in
+      // 3D): allow CG up to a tenth of a factorization's cost per solve, at least cg_max_iterations
+      // (fandisk, 49k tets: 44 s with 0.1, 52 s with 0.25).
+      // The ratio comes from CHOLMOD's flop counts, not from timings, so that runs are reproducible.
+      const int limit =
+          factor_valid ? std::clamp(static_cast<int>(0.1 * sys.factor_to_cg_cost()), opt.cg_max_iterations, 100) : 0;
+      // A solve count that has grown past a fraction of the limit: the next one would likely fail.
+      // Only where the limit is above its floor (large meshes): there a failed solve costs more than
+      // the factorization made early; at the floor it makes no difference in time but changes the
+      // path (spot at 20k tets then ended unrealized).
+      if (factor_valid && opt.cg_refactor_fraction > 0 && limit > opt.cg_max_iterations &&
+          last_cg > opt.cg_refactor_fraction * limit && last_cg > prev_cg)
+        factor_valid = false;
       if (factor_valid) {
         sys.values() = assembled;
         sys.add_diagonal(mu);
-        // On large meshes a factorization costs many CG iterations (O(n^2) against O(n^4/3) in
-        // 3D): allow CG up to a tenth of a factorization's cost per solve, at least cg_max_iterations
-        // (fandisk, 49k tets: 44 s with 0.1, 52 s with 0.25).
-        // The ratio comes from CHOLMOD's flop counts, not from timings, so that runs are reproducible.
-        const int limit = std::clamp(static_cast<int>(0.1 * sys.factor_to_cg_cost()),
-                                     opt.cg_max_iterations, 100);
         const auto [i1, i2] = sys.solve_pcg_pair(g, Hg, gc, Hc, opt.cg_tolerance, limit);
         solved = i1 > 0 && i2 > 0;
+        prev_cg = last_cg;
+        last_cg = solved ? std::max(i1, i2) : 0;
         if (solved) {
           cg_iterations += i1 + i2;
         } else {
@@ -384,6 +394,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         }
         ++factorizations;
         factor_valid = true;
+        last_cg = prev_cg = 0;
         sys.solve_pair(g, Hg, gc, Hc);
       }
       const double lambda = (-gc.dot(Hg) + C) / gc.dot(Hc);

@@ -98,6 +98,15 @@ struct DeformOptions {
   /// counts, so that a run does not depend on the machine's load; at least cg_max_iterations).
   double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
+  /// A new factorization is also made, without trying CG, when the last solve needed more than
+  /// this fraction of that limit and more iterations than the one before it: the count grows as
+  /// the factorization ages (alpha doubled, the shape moved), and the next solve would most likely
+  /// run to the limit and be thrown away (rocker, 132k tets: 9 such solves of 30 iterations, 0.6 s
+  /// each, each followed by the factorization anyway). 0 = off. Measured (`polycube_bench
+  /// --deform-only`, same machine and hour, off -> 0.5): fandisk 39k tets 9.2 -> 6.5 s, rod 80k
+  /// 27.8 -> 25.1 s, bumpy torus 112k 64.9 -> 52.5 s, rocker 132k 66.5 -> 61.4 s, the same ARAP
+  /// and l1_quality < 1e-3; 0.35 and 0.7 were slower on two of the four each.
+  double cg_refactor_fraction = 0.5;
   /// Volume mode: inside the deformation, renumber the interior vertices (those on no boundary
   /// triangle, among their own ids) along a Morton curve and sort the tets by their smallest
   /// vertex, so that the assembly's and the solves' scattered accesses stay local; the result is
