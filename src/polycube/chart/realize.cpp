@@ -425,7 +425,7 @@ class Realizer {
         Kk.setFromTriplets(tk.begin(), tk.end());
         auto& solver = m == Mode::Reduced ? solver_[k] : pinned_solver_[k];
         solver = make_solver();
-        // (The vertex ordering below, restricted to these unknowns, halved their flops on rocker
+        // (The vertex ordering above, restricted to these unknowns, halved their flops on rocker
         // but changed the round-off enough for spot at 20k tets to end unrealized: CHOLMOD's own
         // ordering stays here.)
         if (nv > 0) analyze_and_factorize(*solver, Kk);
