@@ -34,9 +34,9 @@ using SpMat = Eigen::SparseMatrix<double>;
 // Eigen's CHOLMOD wrapper, with a symbolic analysis from a given fill-reducing ordering.
 class Cholmod : public Eigen::CholmodDecomposition<SpMat, Eigen::Lower> {
  public:
-  /// As analyzePattern, but with `perm` (new -> old) as the ordering (try_amd: or AMD's, the
-  /// better by CHOLMOD's measure).
-  void analyze_pattern_given(const SpMat& A, std::vector<int>& perm, bool try_amd = false) {
+  /// As analyzePattern, but with `perm` (new -> old) or AMD's ordering, the better by CHOLMOD's
+  /// measure (METIS is not run).
+  void analyze_pattern_given(const SpMat& A, std::vector<int>& perm) {
     if (m_cholmodFactor) {
       cholmod_free_factor(&m_cholmodFactor, &this->cholmod());
       m_cholmodFactor = nullptr;
@@ -44,7 +44,7 @@ class Cholmod : public Eigen::CholmodDecomposition<SpMat, Eigen::Lower> {
     cholmod_sparse view = Eigen::viewAsCholmod(A.selfadjointView<Eigen::Lower>());
     const int nmethods = this->cholmod().nmethods;
     const int second = this->cholmod().method[1].ordering;
-    this->cholmod().nmethods = try_amd ? 2 : 1;  // method[0]: the given ordering
+    this->cholmod().nmethods = 2;  // method[0]: the given ordering
     this->cholmod().method[1].ordering = CHOLMOD_AMD;
     m_cholmodFactor = cholmod_analyze_p(&view, perm.data(), nullptr, 0, &this->cholmod());
     this->cholmod().nmethods = nmethods;
@@ -91,27 +91,27 @@ void analyze_and_factorize(Cholmod& s, const SpMat& A) {
   analyze(s, A);
   factorize(s, A);
 }
-// The same from a given ordering (no ordering is computed: no lock needed).
-void analyze_and_factorize(Cholmod& s, const SpMat& A, std::vector<int>& perm, bool try_amd = false) {
+// The same from a given ordering or AMD's (no METIS, whose state is global: no lock needed).
+void analyze_and_factorize(Cholmod& s, const SpMat& A, std::vector<int>& perm) {
   {
     const SerialOpenMP serial_openmp;
-    s.analyze_pattern_given(A, perm, try_amd);
+    s.analyze_pattern_given(A, perm);
   }
   factorize(s, A);
 }
 
 // The unknowns 0..count-1 of a system over the mesh's vertices, in the order of their vertices
-// in `vertex_order` (a fill-reducing ordering of the vertex graph); unknown(v, k) for the
-// coordinates k < axes of vertex v (< 0: none). Unknowns shared by many vertices (plane
-// heights: dense rows), marked by shared(u), go last, as a minimum-degree ordering puts them.
+// in `vertex_order` (a fill-reducing ordering of the vertex graph), each vertex's coordinates
+// together; unknown(v, k) for coordinate k of vertex v (< 0: none). Unknowns shared by many
+// vertices (plane heights: dense rows), marked by shared(u), go last, as a minimum-degree
+// ordering puts them.
 template <class Unknown, class Shared>
-std::vector<int> restricted_order(const std::vector<int>& vertex_order, int axes, int count, Unknown unknown,
-                                  Shared shared) {
+std::vector<int> restricted_order(const std::vector<int>& vertex_order, int count, Unknown unknown, Shared shared) {
   std::vector<int> perm;
   perm.reserve(count);
   std::vector<char> seen(count, 0);
   for (int v : vertex_order)
-    for (int k = 0; k < axes; ++k) {
+    for (int k = 0; k < 3; ++k) {
       const int u = unknown(v, k);
       if (u >= 0 && !seen[u] && !shared(u)) {
         seen[u] = 1;
@@ -761,11 +761,11 @@ class Realizer {
     // barely couple and AMD wins (fandisk: 0.6 Gflop against 2.8); where many do, AMD's ordering
     // is poor (rocker, 155k tets: 3x the flops of METIS's) and METIS afresh cost about 1 s per
     // step (the vertex ordering: 1.6x METIS's flops, no ordering time).
-    std::vector<int> perm = restricted_order(vertex_order_, 3, offset[3], dof, [&](int u) {
+    std::vector<int> perm = restricted_order(vertex_order_, offset[3], dof, [&](int u) {
       const int k = u >= offset[2] ? 2 : u >= offset[1] ? 1 : 0;
       return mode == Mode::Reduced && u - offset[k] >= red_.nfree[k];
     });
-    analyze_and_factorize(*solver, H, perm, true);
+    analyze_and_factorize(*solver, H, perm);
     MatX3d d = MatX3d::Zero(n, 3);
     if (solver->info() != Eigen::Success) return d;
     const Eigen::VectorXd x = solver->solve(rhs);

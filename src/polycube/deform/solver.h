@@ -98,8 +98,9 @@ struct DeformOptions {
   /// counts, so that a run does not depend on the machine's load; at least cg_max_iterations).
   double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
-  /// A new factorization is also made, without trying CG, when the last solve needed more than
-  /// this fraction of that limit and more iterations than the one before it: the count grows as
+  /// A new factorization is also made, without trying CG, when that limit is above its floor
+  /// (cg_max_iterations: the large meshes) and the last solve needed more than this fraction of it
+  /// and more iterations than the one before it: the count grows as
   /// the factorization ages (alpha doubled, the shape moved), and the next solve would most likely
   /// run to the limit and be thrown away (rocker, 132k tets: 9 such solves of 30 iterations, 0.6 s
   /// each, each followed by the factorization anyway). 0 = off. Measured (`polycube_bench

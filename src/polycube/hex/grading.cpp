@@ -5,6 +5,7 @@
 
 #include "polycube/chart/realize.h"
 #include "polycube/core/error.h"
+#include "polycube/deform/energies.h"
 #include "polycube/validate/tetmesh.h"
 
 namespace polycube::hex {
@@ -39,12 +40,9 @@ double volume_of(const MatX3d& X, const MatX4i& T) {
 }
 
 double area_of(const MatX3d& X, const MatX3i& F) {
-  double a = 0;
-  for (int f = 0; f < F.rows(); ++f) {
-    const Vec3 p = X.row(F(f, 0)), q = X.row(F(f, 1)), r = X.row(F(f, 2));
-    a += (q - p).cross(r - p).norm() / 2;
-  }
-  return a;
+  double l1 = 0, area = 0;
+  deform::l1_measure(X, F, l1, area);
+  return area;
 }
 
 }  // namespace
