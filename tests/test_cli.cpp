@@ -433,8 +433,20 @@ TEST(Cli, MeasureGivesTheHexStageFigures) {
   ASSERT_EQ(r.code, 0) << r.output;
   const json m = json::parse(r.output);
   for (const char* k : {"count", "inverted", "below_0_5"}) EXPECT_EQ(m["hex"][k], j["hex"][k]) << k;
-  for (const char* k : {"sj_min", "sj_mean", "sj_max", "hausdorff_rel"})
+  for (const char* k : {"sj_min", "sj_mean", "sj_max", "hausdorff_rel", "mean_distance_rel", "rms_distance_rel"})
     EXPECT_NEAR(m["hex"][k].get<double>(), j["hex"][k].get<double>(), 1e-12) << k;
+  // Per side, M.E.S.H.'s figures: the mean within the RMS within the maximum; the larger RMS is
+  // rms_distance_rel, the larger maximum hausdorff_rel.
+  const json& d = j["hex"]["distance"];
+  for (const char* side : {"hex_to_input", "input_to_hex"}) {
+    EXPECT_GT(d[side]["mean_rel"].get<double>(), 0.0) << side;
+    EXPECT_LE(d[side]["mean_rel"].get<double>(), d[side]["rms_rel"].get<double>()) << side;
+    EXPECT_LE(d[side]["rms_rel"].get<double>(), d[side]["max_rel"].get<double>()) << side;
+  }
+  EXPECT_DOUBLE_EQ(j["hex"]["rms_distance_rel"].get<double>(),
+                   std::max(d["hex_to_input"]["rms_rel"].get<double>(), d["input_to_hex"]["rms_rel"].get<double>()));
+  EXPECT_DOUBLE_EQ(j["hex"]["hausdorff_rel"].get<double>(),
+                   std::max(d["hex_to_input"]["max_rel"].get<double>(), d["input_to_hex"]["max_rel"].get<double>()));
   // The edge ratio too (the VTK file's coordinates round the figures a little).
   EXPECT_EQ(m["hex"]["edge_ratio"]["above_10"], j["hex"]["edge_ratio"]["above_10"]);
   EXPECT_NEAR(m["hex"]["edge_ratio"]["max"].get<double>(), j["hex"]["edge_ratio"]["max"].get<double>(), 1e-6);

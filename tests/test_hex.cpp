@@ -188,6 +188,16 @@ TEST(Hex, HausdorffKnownDistances) {
   EXPECT_NEAR(h.b_to_a, 0.0, 1e-12);
   EXPECT_NEAR(h.max, 0.5, 1e-12);
   EXPECT_NEAR(h.a_to_b_at.x(), 1.0, 1e-12);  // reached on the far edge x = 1
+  // Area-weighted like M.E.S.H.: from the unit square to its left half the distance is max(0, x - 1/2),
+  // mean 1/8 and RMS sqrt(1/24) over the square (the vertices, two of them at 0.5, weigh nothing).
+  EXPECT_NEAR(h.mean_a_to_b, 0.125, 2e-3);
+  EXPECT_NEAR(h.rms_a_to_b, std::sqrt(1.0 / 24), 2e-3);
+  EXPECT_NEAR(h.mean_b_to_a, 0.0, 1e-12);
+  EXPECT_NEAR(h.rms_b_to_a, 0.0, 1e-12);
+  // The lifted square: 0.25 everywhere, both ways.
+  h = hex::hausdorff(A, F, B, F, 1000);
+  EXPECT_NEAR(h.mean_a_to_b, 0.25, 1e-12);
+  EXPECT_NEAR(h.rms_b_to_a, 0.25, 1e-12);
 }
 
 TEST(Hex, TetLocatorFindsTheContainingTet) {

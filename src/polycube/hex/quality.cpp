@@ -193,15 +193,21 @@ MatX3i triangulate_quads(const MatX4i& Q) {
 namespace {
 
 // Sample points of a surface: its vertices, then per triangle a number of points proportional to
-// its area (at least the centroid), spread by the R2 low-discrepancy sequence (deterministic).
-std::vector<Vec3> surface_samples(const MatX3d& V, const MatX3i& F, int samples) {
+// its area (at least the centroid), spread by the R2 low-discrepancy sequence (deterministic). Per
+// point its weight in the area integrals: a triangle's points share its area, the vertices none.
+struct Samples {
   std::vector<Vec3> pts;
-  pts.reserve(V.rows() + F.rows() + samples);
+  std::vector<double> weight;
+};
+Samples surface_samples(const MatX3d& V, const MatX3i& F, int samples) {
+  Samples s;
+  s.pts.reserve(V.rows() + F.rows() + samples);
   std::vector<char> used(V.rows(), 0);  // only the vertices of the surface (a volume mesh has others)
   for (int f = 0; f < F.rows(); ++f)
     for (int j = 0; j < 3; ++j) used[F(f, j)] = 1;
   for (int v = 0; v < V.rows(); ++v)
-    if (used[v]) pts.push_back(V.row(v).transpose());
+    if (used[v]) s.pts.push_back(V.row(v).transpose());
+  s.weight.assign(s.pts.size(), 0.0);
   double total = 0;
   std::vector<double> area(F.rows());
   for (int f = 0; f < F.rows(); ++f) {
@@ -211,28 +217,33 @@ std::vector<Vec3> surface_samples(const MatX3d& V, const MatX3i& F, int samples)
   }
   for (int f = 0; f < F.rows(); ++f) {
     const Vec3 a = V.row(F(f, 0)), b = V.row(F(f, 1)), c = V.row(F(f, 2));
-    pts.push_back((a + b + c) / 3);
     const int n = total > 0 ? static_cast<int>(std::lround(samples * area[f] / total)) : 0;
+    const double w = area[f] / (n + 1);
+    s.pts.push_back((a + b + c) / 3);
+    s.weight.push_back(w);
     for (int i = 1; i <= n; ++i) {
       double r1 = std::fmod(0.5 + i * 0.7548776662466927, 1.0), r2 = std::fmod(0.5 + i * 0.5698402909980532, 1.0);
       if (r1 + r2 > 1) {
         r1 = 1 - r1;
         r2 = 1 - r2;
       }
-      pts.push_back(a + r1 * (b - a) + r2 * (c - a));
+      s.pts.push_back(a + r1 * (b - a) + r2 * (c - a));
+      s.weight.push_back(w);
     }
   }
-  return pts;
+  return s;
 }
 
-// Max and mean distance from the points to the surface, and the point of the max, on two threads.
+// Max, area-weighted mean and RMS distance from the samples to the surface, and the point of the
+// max, on two threads.
 struct OneSided {
-  double max = 0, mean = 0;
+  double max = 0, mean = 0, rms = 0;
   Vec3 at = Vec3::Zero();
 };
-OneSided one_sided(const std::vector<Vec3>& pts, const geometry::TriangleTree& tree) {
+OneSided one_sided(const Samples& s, const geometry::TriangleTree& tree) {
+  const std::vector<Vec3>& pts = s.pts;
   const int nt = 2;
-  std::vector<double> mx(nt, 0), sum(nt, 0);
+  std::vector<double> mx(nt, 0), sum(nt, 0), sum2(nt, 0), wsum(nt, 0);
   std::vector<size_t> arg(nt, 0);
   std::vector<std::thread> th;
   for (int t = 0; t < nt; ++t)
@@ -240,7 +251,9 @@ OneSided one_sided(const std::vector<Vec3>& pts, const geometry::TriangleTree& t
       for (size_t i = t; i < pts.size(); i += nt) {
         const double d = std::sqrt(tree.closest(pts[i]).dist2);
         if (d > mx[t]) mx[t] = d, arg[t] = i;
-        sum[t] += d;
+        sum[t] += s.weight[i] * d;
+        sum2[t] += s.weight[i] * d * d;
+        wsum[t] += s.weight[i];
       }
     });
   for (auto& t : th) t.join();
@@ -249,7 +262,11 @@ OneSided one_sided(const std::vector<Vec3>& pts, const geometry::TriangleTree& t
   const int w = mx[1] > mx[0] ? 1 : 0;
   r.max = mx[w];
   r.at = pts[arg[w]];
-  r.mean = (sum[0] + sum[1]) / pts.size();
+  const double W = wsum[0] + wsum[1];
+  if (W > 0) {
+    r.mean = (sum[0] + sum[1]) / W;
+    r.rms = std::sqrt((sum2[0] + sum2[1]) / W);
+  }
   return r;
 }
 
@@ -264,6 +281,8 @@ Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const 
   h.b_to_a = ba.max;
   h.mean_a_to_b = ab.mean;
   h.mean_b_to_a = ba.mean;
+  h.rms_a_to_b = ab.rms;
+  h.rms_b_to_a = ba.rms;
   h.a_to_b_at = ab.at;
   h.b_to_a_at = ba.at;
   h.max = std::max(ab.max, ba.max);

@@ -72,12 +72,16 @@ MatX3i triangulate_quads(const MatX4i& Q);
 
 /// Two-sided Hausdorff distance between surfaces A and B, estimated by sampling: every vertex of a
 /// triangle and points spread on every triangle (about `samples` per surface, at least the vertices and
-/// centroids), each measured exactly to the other surface (closest point). Like Metro/M.E.S.H.
+/// centroids), each measured exactly to the other surface (closest point). Like Metro/M.E.S.H.:
+/// besides the maxima, the one-sided mean and root-mean-square distances as integrals over the
+/// sampled surface divided by its area (each triangle's samples weigh its area equally; the
+/// vertices, sampled for the maximum, weigh nothing).
 struct Hausdorff {
   double a_to_b = 0;     ///< max over samples of A of the distance to B
   double b_to_a = 0;
   double max = 0;        ///< two-sided: max of both
-  double mean_a_to_b = 0, mean_b_to_a = 0;
+  double mean_a_to_b = 0, mean_b_to_a = 0;  ///< area-weighted mean distance
+  double rms_a_to_b = 0, rms_b_to_a = 0;    ///< area-weighted root-mean-square distance
   Vec3 a_to_b_at = Vec3::Zero();  ///< the sample of A farthest from B (where a_to_b is reached)
   Vec3 b_to_a_at = Vec3::Zero();
 };

@@ -23,7 +23,10 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks = {});
 
 /// Adds the Hausdorff figures of mesh `key` ("hex", "quad") against the input to j: hausdorff,
 /// hausdorff_rel (/ diag), hausdorff_KEY_to_input, hausdorff_input_to_KEY, the points where those
-/// are reached (..._at), mean_distance_rel. Shared by `polycube measure` and the hex stage.
+/// are reached (..._at), mean_distance_rel (the two one-sided area-weighted means, averaged),
+/// rms_distance_rel (the larger one-sided RMS) and `distance` {KEY_to_input, input_to_KEY: {max_rel,
+/// mean_rel, rms_rel}} (the figures Metro, M.E.S.H. and MeshLab print). Shared by `polycube measure`
+/// and the hex and quad stages.
 void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, const std::string& key);
 /// {"max", "mean", "above_10", "above_100"} of the elements' edge ratios (hex::QualityStats).
 nlohmann::json edge_ratio_json(const hex::QualityStats& q);
