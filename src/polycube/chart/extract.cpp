@@ -51,8 +51,12 @@ std::vector<int> inverted_tets(const RealizeResult& r) {
 
 }  // namespace
 
-PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
-                                    const ExtractOptions& opt, const Hooks& hooks) {
+namespace {
+
+// extract_polycube; `first`: the first realization of this labelling, when an earlier pass made
+// it (the same inputs and options: its result is the same).
+PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                           const ExtractOptions& opt, const Hooks& hooks, const RealizeResult* first) {
   PolycubeExtraction e;
   e.labels = label_by_normal(deformed, B);
   e.initial_charts = build_charts(deformed, B, e.labels).count();
@@ -69,7 +73,14 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
               std::to_string(e.cleanup.degree1 + e.cleanup.degree2 + e.cleanup.degree3) + " charts removed), " +
               std::to_string(e.charts.corners) + " corners");
   for (const auto& p : e.charts.problems) hooks.debug("chart graph: " + p);
-  e.realized = realize_polycube(rest, T, B, deformed, e.labels, opt.realize, hooks);
+  if (first) {
+    e.realized = *first;
+    hooks.debug("the first realization as in the pass before (" +
+                std::string(first->success ? "realized" : first->failure) + ")");
+  } else {
+    e.realized = realize_polycube(rest, T, B, deformed, e.labels, opt.realize, hooks);
+  }
+  const RealizeResult first_realization = e.realized;
   // Surface mode: a few triangles still folded in their chart's plane. Edge flips inside a chart
   // (same vertices, another triangulation); then collapses of the folded triangles' edges (two
   // triangles fewer, one vertex merged into a neighbour) and a new realization, a few rounds.
@@ -687,9 +698,17 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
                 " retries kept from earlier realizations' states; the retries again, each from the deformed mesh");
     ExtractOptions cold = opt;
     cold.warm_retries = false;
-    return extract_polycube(rest, T, B, deformed, cold, hooks);
+    // Its first realization is this pass's (spot at 20k tets, same polycube: 25.1 -> 20.9 s).
+    return extract(rest, T, B, deformed, cold, hooks, &first_realization);
   }
   return e;
+}
+
+}  // namespace
+
+PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                                    const ExtractOptions& opt, const Hooks& hooks) {
+  return extract(rest, T, B, deformed, opt, hooks, nullptr);
 }
 
 int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels) {

@@ -49,7 +49,8 @@ struct ExtractOptions {
   /// deformed mesh again only if that fails: one untangling instead of the continuation's path
   /// and a second start per retry. A failed retry that leaves fewer tets inverted (or as many and
   /// fewer triangles facing away) is kept as the next one's start; if the extraction then ends
-  /// without a polycube, the retries are run again from the start, each from the deformed mesh.
+  /// without a polycube, the retries are run again from the start, each from the deformed mesh
+  /// (the first realization, the same in both passes, is not made again).
   bool warm_retries = true;
   CleanupOptions cleanup;
   RealizeOptions realize;
