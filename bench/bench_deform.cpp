@@ -143,6 +143,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   bool locality_order = false;
   app.add_flag("--locality-order", locality_order, "DeformOptions::locality_order for the volume runs");
+  bool neutral_barrier = false;
+  app.add_flag("--neutral-volume-barrier", neutral_barrier,
+               "DeformOptions::neutral_volume_barrier for the volume runs (the CLI's --volume-barrier-form neutral)");
   double grading = hex::GradingOptions{}.strength;
   app.add_option("--grading", grading, "HexOptions::grading.strength (0: the paper's uniform grid)")->capture_default_str();
   bool deform_only = false;
@@ -200,6 +203,7 @@ int main(int argc, char** argv) {
       deform::DeformOptions dopt;
       dopt.sqp_tolerance = sqp_tolerance;
       dopt.locality_order = locality_order;
+      dopt.neutral_volume_barrier = neutral_barrier;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {
         auto& c = paper[m.paper_row];
         p1 = c[1];
