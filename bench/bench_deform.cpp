@@ -112,7 +112,7 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only, 
                   m.file.c_str(), (long)s.F.rows(), r.seconds, extraction_seconds, e.charts.corners, e.realized.arap, q.quality.count, q.quality.sj_min,
                   q.quality.sj_mean, q.quality.sj_max, q.quality.inverted, q.quality.edge_ratio_max,
                   q.quality.edge_ratio_above_10, 1e3 * hd.max / box.diagonal().norm(),
-                  1e3 * std::max(hd.rms_a_to_b, hd.rms_b_to_a) / box.diagonal().norm(), q.crease_captured, q.crease_runs, q.seconds, p[0].c_str(), p[1].c_str(), p[2].c_str(), p[3].c_str());
+                  1e3 * hd.rms() / box.diagonal().norm(), q.crease_captured, q.crease_runs, q.seconds, p[0].c_str(), p[1].c_str(), p[2].c_str(), p[3].c_str());
     } catch (const Error& err) {
       std::printf("| %s | error: %s |\n", m.file.c_str(), err.what());
     }
@@ -276,7 +276,7 @@ int main(int argc, char** argv) {
                       m.file.c_str(), h.quality.count, h.pillow_hexes, h.quality.sj_min, h.quality.sj_mean,
                       h.quality.sj_max, h.quality.inverted, h.quality.below_0_5, h.quality.edge_ratio_max,
                       h.quality.edge_ratio_above_10, 1e3 * hd.max / d,
-                      1e3 * 0.5 * (hd.mean_a_to_b + hd.mean_b_to_a) / d, 1e3 * std::max(hd.rms_a_to_b, hd.rms_b_to_a) / d,
+                      1e3 * hd.mean() / d, 1e3 * hd.rms() / d,
                       hex_seconds, q1.c_str(), q2.c_str(),
                       q3.c_str(), q4.c_str());
         hex_rows.push_back(buf);

@@ -4,6 +4,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <set>
 #include <string>
 #include <tuple>
@@ -80,7 +81,9 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   } else {
     e.realized = realize_polycube(rest, T, B, deformed, e.labels, opt.realize, hooks);
   }
-  const RealizeResult first_realization = e.realized;
+  // Kept for the second pass of retries, which only the warm retries can call for.
+  std::optional<RealizeResult> first_realization;
+  if (opt.warm_retries) first_realization = e.realized;
   // Surface mode: a few triangles still folded in their chart's plane. Edge flips inside a chart
   // (same vertices, another triangulation); then collapses of the folded triangles' edges (two
   // triangles fewer, one vertex merged into a neighbour) and a new realization, a few rounds.
@@ -699,7 +702,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     ExtractOptions cold = opt;
     cold.warm_retries = false;
     // Its first realization is this pass's (spot at 20k tets, same polycube: 25.1 -> 20.9 s).
-    return extract(rest, T, B, deformed, cold, hooks, &first_realization);
+    return extract(rest, T, B, deformed, cold, hooks, &*first_realization);
   }
   return e;
 }

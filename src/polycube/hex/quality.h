@@ -2,6 +2,7 @@
 // distance between two surfaces. Used by the hex stage and by `polycube measure`, so that our
 // meshes and other tools' meshes are measured the same way.
 #pragma once
+#include <algorithm>
 #include <array>
 #include <vector>
 
@@ -84,6 +85,9 @@ struct Hausdorff {
   double rms_a_to_b = 0, rms_b_to_a = 0;    ///< area-weighted root-mean-square distance
   Vec3 a_to_b_at = Vec3::Zero();  ///< the sample of A farthest from B (where a_to_b is reached)
   Vec3 b_to_a_at = Vec3::Zero();
+  /// The two one-sided means, averaged; the larger one-sided RMS (the reports' figures).
+  double mean() const { return 0.5 * (mean_a_to_b + mean_b_to_a); }
+  double rms() const { return std::max(rms_a_to_b, rms_b_to_a); }
 };
 Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const MatX3i& FB, int samples = 200000);
 

@@ -80,8 +80,8 @@ void add_hausdorff(nlohmann::json& j, const hex::Hausdorff& d, double diag, cons
   j["hausdorff_input_to_" + key] = d.b_to_a;
   j["hausdorff_" + key + "_to_input_at"] = point(d.a_to_b_at);
   j["hausdorff_input_to_" + key + "_at"] = point(d.b_to_a_at);
-  j["mean_distance_rel"] = 0.5 * (d.mean_a_to_b + d.mean_b_to_a) / diag;
-  j["rms_distance_rel"] = std::max(d.rms_a_to_b, d.rms_b_to_a) / diag;
+  j["mean_distance_rel"] = d.mean() / diag;
+  j["rms_distance_rel"] = d.rms() / diag;
   // Per side, like Metro / M.E.S.H. / MeshLab (max, mean, RMS, relative to the bbox diagonal).
   auto side = [&](double mx, double mean, double rms) {
     return nlohmann::json{{"max_rel", mx / diag}, {"mean_rel", mean / diag}, {"rms_rel", rms / diag}};

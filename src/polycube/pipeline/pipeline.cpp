@@ -824,7 +824,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
                    std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
                    ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " (RMS " +
-                   std::to_string(std::max(hd.rms_a_to_b, hd.rms_b_to_a) / box.diagonal().norm()) +
+                   std::to_string(hd.rms() / box.diagonal().norm()) +
                    ") of the bbox diagonal");
         add_hausdorff(report["quad"], hd, box.diagonal().norm(), "quad");
         warn_if_far(hooks, hd, box.diagonal().norm(), "quad mesh");
@@ -914,7 +914,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.info("hex mesh: " + std::to_string(hr.quality.count) + " hexes, scaled Jacobian min " +
                    std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
                    ", Hausdorff " + std::to_string(hd.max / diag) + " (RMS " +
-                   std::to_string(std::max(hd.rms_a_to_b, hd.rms_b_to_a) / diag) + ") of the bbox diagonal");
+                   std::to_string(hd.rms() / diag) + ") of the bbox diagonal");
         warn_if_far(hooks, hd, diag, "hex mesh");
         warn_if_slivers(hooks, hr.quality, "hexes");
         hooks.report("hex", 1);
