@@ -1,4 +1,5 @@
 // polycube command-line tool: a thin layer over the library (src/polycube/pipeline).
+#include <spdlog/pattern_formatter.h>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -8,6 +9,7 @@
 #include <iostream>
 
 #include "polycube/core/error.h"
+#include "polycube/core/parallel.h"
 #include "polycube/examples/examples.h"
 #include "polycube/pipeline/measure.h"
 #include "polycube/pipeline/pipeline.h"
@@ -29,6 +31,20 @@ struct ProgressBar {
     if (f >= 1) std::fprintf(stderr, "\n");
     std::fflush(stderr);
   }
+};
+
+// spdlog pattern flag: the seconds since the logger's formatter was made (the run's start).
+class ElapsedFlag : public spdlog::custom_flag_formatter {
+ public:
+  void format(const spdlog::details::log_msg& msg, const std::tm&, spdlog::memory_buf_t& dest) override {
+    const double s = std::chrono::duration<double>(msg.time - start_).count();
+    const std::string text = fmt::format("{:.1f}s", s);
+    dest.append(text.data(), text.data() + text.size());
+  }
+  std::unique_ptr<custom_flag_formatter> clone() const override { return std::make_unique<ElapsedFlag>(*this); }
+
+ private:
+  spdlog::log_clock::time_point start_ = spdlog::log_clock::now();
 };
 
 }  // namespace
@@ -62,6 +78,7 @@ int measure_main(int argc, char** argv) {
 }
 
 int main(int argc, char** argv) {
+  reexec_with_portable_blas(argv);  // the same bits on every AVX2 machine (core/parallel.h)
   if (argc >= 2 && std::string(argv[1]) == "measure") return measure_main(argc - 1, argv + 1);
   CLI::App app{
       "polycube: l1-based polycube maps of 3D shapes and hex/quad remeshing.\n"
@@ -350,7 +367,14 @@ int main(int argc, char** argv) {
   }
   if (no_cleanup) opt.polycube.cleanup = {false, false, false, false};
   auto logger = spdlog::stderr_color_mt("polycube");
-  logger->set_pattern("%^[%l]%$ %v");
+  if (verbose) {
+    // With -v, each line gives the seconds since the start: where a long run spends its time.
+    auto formatter = std::make_unique<spdlog::pattern_formatter>();
+    formatter->add_flag<ElapsedFlag>('*').set_pattern("%^[%l %*]%$ %v");
+    logger->set_formatter(std::move(formatter));
+  } else {
+    logger->set_pattern("%^[%l]%$ %v");
+  }
   logger->set_level(quiet ? spdlog::level::warn : verbose ? spdlog::level::debug : spdlog::level::info);
 
   if (opt.example == "list") {

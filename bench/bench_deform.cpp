@@ -18,6 +18,7 @@
 
 #include "polycube/chart/extract.h"
 #include "polycube/core/error.h"
+#include "polycube/core/parallel.h"
 #include "polycube/core/log.h"
 #include "polycube/deform/solver.h"
 #include "polycube/hex/extract.h"
@@ -122,6 +123,7 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only, 
 }
 
 int main(int argc, char** argv) {
+  reexec_with_portable_blas(argv);  // the same bits on every AVX2 machine (core/parallel.h)
   CLI::App app{"Benchmark of the polycube deformation and extraction against the paper's Table II"};
   std::string shared = POLYCUBE_SHARED_DIR;
   int runs = 1;

@@ -543,7 +543,9 @@ TEST(Realize, Eq17StartPastItsBudgetDoesNotCompeteWithASuccessfulContinuation) {
   ASSERT_LT(eq.realized.arap, cont.realized.arap);
   const auto [tm4, any] = box_hole_realized("auto", -1, -1);
   EXPECT_EQ(any.realized.start, "eq17");
-  EXPECT_NEAR(any.realized.arap, eq.realized.arap, 1e-9 * eq.realized.arap);
+  // Side by side, the BLAS keeps one thread throughout (set_blas_threads), alone it has two: the
+  // factorizations round differently (1.2e-9 relative on an AVX2 machine).
+  EXPECT_NEAR(any.realized.arap, eq.realized.arap, 1e-8 * eq.realized.arap);
 }
 
 TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {

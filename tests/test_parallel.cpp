@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstdlib>
 #include <stdexcept>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -17,7 +19,47 @@ int omp_levels() {
   static const auto f = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "omp_get_max_active_levels"));
   return f ? f() : -1;
 }
+int blas_threads() {
+  using Get = int (*)();
+  static const auto f = reinterpret_cast<Get>(dlsym(RTLD_DEFAULT, "openblas_get_num_threads"));
+  return f ? f() : -1;
+}
 }  // namespace
+
+TEST(Parallel, BlasKeepsOneThreadWhileARunPairRuns) {
+  if (blas_threads() < 0) GTEST_SKIP() << "the loaded BLAS is not OpenBLAS";
+  set_blas_threads(hardware_threads());
+  ASSERT_EQ(blas_threads(), hardware_threads());
+  std::atomic<int> inside_max{0};
+  run_pair([&](int k) {
+    // A factorization asks for two threads (deform/sparse_system.cpp): while the pair runs, one.
+    if (k == 0) set_blas_threads(2);
+    int n = blas_threads();
+    for (int seen = inside_max.load(); n > seen && !inside_max.compare_exchange_weak(seen, n);) {
+    }
+    run_pair([&](int) { set_blas_threads(2); });  // a nested pair ends: still inside the outer one
+    n = blas_threads();
+    for (int seen = inside_max.load(); n > seen && !inside_max.compare_exchange_weak(seen, n);) {
+    }
+  });
+  EXPECT_EQ(inside_max.load(), 1);
+  EXPECT_EQ(blas_threads(), hardware_threads());  // restored once the pair has ended
+}
+
+TEST(Parallel, BlasKernelsArePinnedOnAvx2Machines) {
+  // The test binary's main calls reexec_with_portable_blas, as the CLI and the bench do.
+  const std::string core = blas_core();
+  if (core.empty()) GTEST_SKIP() << "the loaded BLAS is not OpenBLAS";
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) {
+    GTEST_SKIP() << "no AVX2: OpenBLAS keeps the kernels it picked";
+  }
+  const char* env = std::getenv("OPENBLAS_CORETYPE");
+  ASSERT_NE(env, nullptr) << "reexec_with_portable_blas sets it on an AVX2 machine";
+  if (std::string(env) == "Haswell") {  // else the user's own choice
+    EXPECT_EQ(core, "Haswell");
+  }
+}
 
 // Both tasks run, on two threads when the machine has two cores, thousands of times in a row
 // (the handshake must not lose a wake-up), with the results visible to the caller afterwards.

@@ -345,6 +345,37 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
       }
     const auto pinned = pinned_edges(r, bedges);
     cand.insert(cand.end(), pinned.begin(), pinned.end());
+    // Also in the last resort: a boundary face of an inverted tet that faces away from its label.
+    // No move of the tet's interior vertex can turn the tet back over, so its shortest edge is a
+    // candidate too (bumpy torus at 95k tets, beta 0: a corner and a chart vertex 4e-5 of the
+    // diagonal apart, their triangle of area 1e-6 folded, the one tet on it left inverted by every
+    // retry). Not before: as a candidate from the first retry on, it turned spot at 20k tets
+    // (realized by the retries as they were) into a failure.
+    if (folded && r.inverted > 0) {
+      std::set<std::array<int, 3>> inverted_faces;
+      for (int t : inverted_tets(r))
+        for (int k = 0; k < 4; ++k) {
+          std::array<int, 3> f{r.T(t, (k + 1) % 4), r.T(t, (k + 2) % 4), r.T(t, (k + 3) % 4)};
+          std::sort(f.begin(), f.end());
+          inverted_faces.insert(f);
+        }
+      for (int f = 0; f < CB.rows() && !inverted_faces.empty(); ++f) {
+        std::array<int, 3> key{CB(f, 0), CB(f, 1), CB(f, 2)};
+        std::sort(key.begin(), key.end());
+        if (!inverted_faces.count(key) || !faces_away(r.X, f, diag)) continue;
+        int best = 0;
+        double shortest = std::numeric_limits<double>::infinity();
+        for (int k = 0; k < 3; ++k) {
+          const double len = (r.X.row(CB(f, k)) - r.X.row(CB(f, (k + 1) % 3))).norm();
+          if (len < shortest) shortest = len, best = k;
+        }
+        const int u = CB(f, best), v = CB(f, (best + 1) % 3);
+        cand.emplace_back(std::min(u, v), std::max(u, v));
+        of_folds.insert(cand.back());
+        hooks.debug("folded triangle " + std::to_string(cb_row[f]) + " of an inverted tet: its shortest edge " +
+                    std::to_string(u) + "-" + std::to_string(v) + " is a collapse candidate");
+      }
+    }
     std::sort(cand.begin(), cand.end());
     cand.erase(std::unique(cand.begin(), cand.end()), cand.end());
     if (cand.empty()) return 0;
@@ -563,6 +594,26 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   // Surface mode: flips and collapses first (the relabelling below mostly comes back to the same
   // folds there, at the cost of a realization per attempt).
   if (T.rows() == 0) repair_surface();
+  // Surface mode: a later start realized the layout where the deformed surface's start left a few
+  // triangles folded; that state, repaired, may be closer to the deformation (ExtractOptions::
+  // repair_deformed_start): the lower ARAP distortion is kept.
+  if (T.rows() == 0 && opt.repair_deformed_start && e.realized.success && opt.realize.surface_starts > 1 &&
+      (e.realized.start == "surface_arap" || e.realized.start == "surface_harmonic")) {
+    PolycubeExtraction later = e;
+    RealizeOptions ro = opt.realize;
+    ro.surface_starts = 1;
+    e.realized = realize_polycube(rest, T, B, deformed, e.labels, ro, hooks);
+    repair_surface();
+    if (e.realized.success && e.realized.arap < later.realized.arap) {
+      hooks.debug("the deformed start, repaired: ARAP " + std::to_string(e.realized.arap) + " against " +
+                  std::to_string(later.realized.arap) + " from the " + later.realized.start + " start: kept");
+    } else {
+      hooks.debug("the deformed start, repaired: " +
+                  (e.realized.success ? "ARAP " + std::to_string(e.realized.arap) : e.realized.failure) + "; the " +
+                  later.realized.start + " start's polycube kept (ARAP " + std::to_string(later.realized.arap) + ")");
+      e = std::move(later);
+    }
+  }
   bool retried = false;
   // A realization with every tet positive but some boundary triangles flipped or flattened in
   // their plane: those triangles sit where their chart cannot reach (typically a chart border

@@ -50,6 +50,10 @@ struct RealizeOptions {
   /// vertices around the inverted tets), then the ARAP minimization. "penalty": the penalty path
   /// (see penalty_path) from the deformed mesh alone.
   std::string start = "auto";
+  /// Surface mode: the starts tried in turn until one realizes the layout: 1 the deformed surface
+  /// on the planes, 2 also ARAP iterations from it, 3 also the harmonic layout (see
+  /// realize_surface.cpp).
+  int surface_starts = 3;
   int max_iterations = 200;       ///< ARAP Newton iterations at most
   double tolerance = 1e-6;        ///< stop when an iteration lowers the energy by less than this, relatively
   int untangle_iterations = 20;   ///< eq17 start: local/global steps at most to remove inverted tets (its wins on the shared meshes needed <= 3)

@@ -551,13 +551,13 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     X = positions();
     bad = finish(X, "surface_deformed");
   }
-  if (bad > 0 && !start) {
+  if (bad > 0 && !start && opt.surface_starts >= 2) {
     std::array<Eigen::VectorXd, 3> y1 = y_start;
     MatX3d X1 = arap(y1, false, its);
     const int bad1 = finish(X1, "surface_arap");
     if (bad1 < bad) X = std::move(X1), bad = bad1;
   }
-  if (bad > 0 && !start) {
+  if (bad > 0 && !start && opt.surface_starts >= 3) {
     std::vector<Eigen::Triplet<double>> ut;
     // Vertices no triangle uses (merged away by collapse_folded_edges) stay where they are.
     std::vector<char> used(n, 0);

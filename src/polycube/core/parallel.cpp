@@ -1,21 +1,66 @@
 #include "polycube/core/parallel.h"
 
 #include <dlfcn.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
 #include <mutex>
 
 namespace polycube {
 
 int hardware_threads() { return static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency()))); }
 
-void set_blas_threads(int n) {
+std::string blas_core() {
+  using GetName = char* (*)();
+  static const auto f = reinterpret_cast<GetName>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));
+  const char* name = f ? f() : nullptr;
+  return name ? std::string(name) : std::string();
+}
+
+void reexec_with_portable_blas(char** argv) {
+#if defined(__x86_64__) && defined(__linux__)
+  if (std::getenv("OPENBLAS_CORETYPE") != nullptr) return;
+  __builtin_cpu_init();
+  if (!__builtin_cpu_supports("avx2") || !__builtin_cpu_supports("fma")) return;
+  if (setenv("OPENBLAS_CORETYPE", "Haswell", 1) != 0) return;
+  execv("/proc/self/exe", argv);
+  unsetenv("OPENBLAS_CORETYPE");  // the exec failed: go on with the kernels loaded
+#else
+  (void)argv;
+#endif
+}
+
+namespace {
+std::mutex& blas_mutex() {
+  static std::mutex m;
+  return m;
+}
+int pair_depth = 0;  // guarded by blas_mutex()
+void apply_blas_threads(int n) {
   using SetThreads = void (*)(int);
   static const auto f = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads"));
   if (f) f(n);
 }
+}  // namespace
+
+void set_blas_threads(int n) {
+  const std::lock_guard<std::mutex> lock(blas_mutex());
+  apply_blas_threads(pair_depth > 0 ? 1 : n);
+}
+
+namespace detail {
+void enter_pair() {
+  const std::lock_guard<std::mutex> lock(blas_mutex());
+  if (pair_depth++ == 0) apply_blas_threads(1);
+}
+void leave_pair() {
+  const std::lock_guard<std::mutex> lock(blas_mutex());
+  if (--pair_depth == 0) apply_blas_threads(hardware_threads());
+}
+}  // namespace detail
 
 namespace {
 struct OpenMPLevels {

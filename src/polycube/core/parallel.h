@@ -3,6 +3,7 @@
 #pragma once
 #include <exception>
 #include <memory>
+#include <string>
 #include <thread>
 
 namespace polycube {
@@ -10,8 +11,26 @@ namespace polycube {
 /// Cores used: 1 or 2 (more do not pay at our sizes: memory-bound solves, small dense kernels).
 int hardware_threads();
 
+/// The kernels OpenBLAS runs, by its core name ("Haswell", "Zen", "SkylakeX", ...); empty when the
+/// loaded BLAS is not OpenBLAS.
+std::string blas_core();
+
+/// For executables, first thing in main(). OpenBLAS picks its kernels per CPU when it loads, and
+/// kernels round differently: the same input gave other deformations, polycubes and meshes on an
+/// AVX-512 machine than on an AVX2 one (box_hole's hexes: Hausdorff 2.59e-3 against 2.54e-3;
+/// fandisk's surface polycube: ARAP 0.037 against 0.097). On a CPU with AVX2 and FMA, unless the
+/// environment sets OPENBLAS_CORETYPE already, this sets it to Haswell (the AVX2 kernels, which
+/// Intel CPUs since 2013 and AMD's since Zen run) and executes the program again with the same
+/// arguments, so that results are the same bits on every such machine. Returns only when it did
+/// not execute the program again (environment set, no AVX2, or the exec failed).
+void reexec_with_portable_blas(char** argv);
+
 /// Sets OpenBLAS's thread count if the loaded BLAS is OpenBLAS (looked up at run time, so that
-/// any other BLAS works too); no effect otherwise.
+/// any other BLAS works too); no effect otherwise. While a run_pair runs (in any thread), the count
+/// stays 1 whatever n is: OpenBLAS rounds differently with one thread and with two (its dpotrf
+/// blocks otherwise), so a task that factorized with two threads once the other task had ended
+/// gave results that depended on which task ended first (the realization's two starts: spot's
+/// polycube differed under load).
 void set_blas_threads(int n);
 
 /// While an instance exists (in any thread), OpenMP parallel regions run on one thread; the setting
@@ -30,6 +49,10 @@ class SerialOpenMP {
 };
 
 namespace detail {
+/// run_pair calls in progress (the BLAS keeps one thread while any is).
+void enter_pair();
+void leave_pair();  // restores the BLAS to hardware_threads() when the last one ends
+
 /// The second core's persistent worker. Starting a thread per task cost 0.2-0.3 ms on this
 /// project's virtual machine, against tasks of 1-3 ms (the preconditioner's sweeps, several per CG
 /// iteration). One task at a time: claim() returns false while another caller holds the worker
@@ -61,7 +84,7 @@ void run_pair(F&& f) {
     f(1);
     return;
   }
-  set_blas_threads(1);
+  detail::enter_pair();
   std::exception_ptr failure;
   auto second = [&] {
     try {
@@ -83,7 +106,7 @@ void run_pair(F&& f) {
       worker.wait();
     else
       other.join();
-    set_blas_threads(hardware_threads());
+    detail::leave_pair();
   };
   try {
     f(0);

@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "polycube/core/error.h"
+#include "polycube/core/parallel.h"
 #include "polycube/core/topology.h"
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/closest_point.h"
@@ -154,7 +155,8 @@ json tet_json(const TetMesh& tm, const TetQuality& q) {
 json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
   Stopwatch total;
   json report;
-  report["tool"] = {{"name", "polycube"}, {"version", POLYCUBE_VERSION}};
+  // The BLAS kernels set the rounding, hence the bits of the results (reexec_with_portable_blas).
+  report["tool"] = {{"name", "polycube"}, {"version", POLYCUBE_VERSION}, {"blas_core", blas_core()}};
   report["status"] = "running";
   report["timings"] = json::object();
   const fs::path out(opt.out_dir);
