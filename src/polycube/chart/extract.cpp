@@ -328,21 +328,23 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     const auto bedges = unique_edges(CB);
     std::vector<std::pair<int, int>> cand;
     std::set<std::pair<int, int>> of_folds;  // candidates that are the shortest edge of a folded triangle
-    if (fold_case)
-      for (int f = 0; f < CB.rows(); ++f) {
-        if (!faces_away(r.X, f, diag)) continue;
-        int best = 0;
-        double shortest = std::numeric_limits<double>::infinity();
-        for (int k = 0; k < 3; ++k) {
-          const double len = (r.X.row(CB(f, k)) - r.X.row(CB(f, (k + 1) % 3))).norm();
-          if (len < shortest) shortest = len, best = k;
-        }
-        const int u = CB(f, best), v = CB(f, (best + 1) % 3);
-        cand.emplace_back(std::min(u, v), std::max(u, v));
-        of_folds.insert(cand.back());
-        hooks.debug("folded triangle " + std::to_string(cb_row[f]) + ": its shortest edge " + std::to_string(u) +
-                    "-" + std::to_string(v) + " is a collapse candidate");
+    // The shortest edge of row f of CB in r.X, a candidate.
+    auto add_shortest_edge = [&](int f, const char* which) {
+      int best = 0;
+      double shortest = std::numeric_limits<double>::infinity();
+      for (int k = 0; k < 3; ++k) {
+        const double len = (r.X.row(CB(f, k)) - r.X.row(CB(f, (k + 1) % 3))).norm();
+        if (len < shortest) shortest = len, best = k;
       }
+      const int u = CB(f, best), v = CB(f, (best + 1) % 3);
+      cand.emplace_back(std::min(u, v), std::max(u, v));
+      of_folds.insert(cand.back());
+      hooks.debug("folded triangle " + std::to_string(cb_row[f]) + which + ": its shortest edge " +
+                  std::to_string(u) + "-" + std::to_string(v) + " is a collapse candidate");
+    };
+    if (fold_case)
+      for (int f = 0; f < CB.rows(); ++f)
+        if (faces_away(r.X, f, diag)) add_shortest_edge(f, "");
     const auto pinned = pinned_edges(r, bedges);
     cand.insert(cand.end(), pinned.begin(), pinned.end());
     // Also in the last resort: a boundary face of an inverted tet that faces away from its label.
@@ -362,18 +364,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
       for (int f = 0; f < CB.rows() && !inverted_faces.empty(); ++f) {
         std::array<int, 3> key{CB(f, 0), CB(f, 1), CB(f, 2)};
         std::sort(key.begin(), key.end());
-        if (!inverted_faces.count(key) || !faces_away(r.X, f, diag)) continue;
-        int best = 0;
-        double shortest = std::numeric_limits<double>::infinity();
-        for (int k = 0; k < 3; ++k) {
-          const double len = (r.X.row(CB(f, k)) - r.X.row(CB(f, (k + 1) % 3))).norm();
-          if (len < shortest) shortest = len, best = k;
-        }
-        const int u = CB(f, best), v = CB(f, (best + 1) % 3);
-        cand.emplace_back(std::min(u, v), std::max(u, v));
-        of_folds.insert(cand.back());
-        hooks.debug("folded triangle " + std::to_string(cb_row[f]) + " of an inverted tet: its shortest edge " +
-                    std::to_string(u) + "-" + std::to_string(v) + " is a collapse candidate");
+        if (inverted_faces.count(key) && faces_away(r.X, f, diag)) add_shortest_edge(f, " of an inverted tet");
       }
     }
     std::sort(cand.begin(), cand.end());
