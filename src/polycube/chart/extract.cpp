@@ -588,7 +588,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   // Surface mode: a later start realized the layout where the deformed surface's start left a few
   // triangles folded; that state, repaired, may be closer to the deformation (ExtractOptions::
   // repair_deformed_start): the lower ARAP distortion is kept.
-  if (T.rows() == 0 && opt.repair_deformed_start && e.realized.success && opt.realize.surface_starts > 1 &&
+  if (T.rows() == 0 && opt.repair_deformed_start && e.realized.success &&
       (e.realized.start == "surface_arap" || e.realized.start == "surface_harmonic")) {
     PolycubeExtraction later = e;
     RealizeOptions ro = opt.realize;
