@@ -23,6 +23,7 @@
 #include "polycube/deform/solver.h"
 #include "polycube/hex/extract.h"
 #include "polycube/io/readers.h"
+#include "polycube/io/writers.h"
 #include "polycube/quad/quad.h"
 #include "polycube/tetra/tetrahedralize.h"
 #include "polycube/validate/surface.h"
@@ -153,6 +154,10 @@ int main(int argc, char** argv) {
   bool deform_only = false;
   app.add_flag("--deform-only", deform_only,
                "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
+  std::string save_dir;
+  app.add_option("--save", save_dir,
+                 "Write each model's tet mesh and deformed mesh to DIR/<model stem>/{tetmesh,deformed}.mesh, so that "
+                 "the CLI can take a row further (`polycube DIR/m/tetmesh.mesh --deformed DIR/m/deformed.mesh`)");
   CLI11_PARSE(app, argc, argv);
   if (quad_table) return quad_bench(shared, only, quad_beta, sqp_tolerance);
 
@@ -222,6 +227,17 @@ int main(int argc, char** argv) {
         secs.push_back(r.seconds);
       }
       std::sort(secs.begin(), secs.end());
+      if (!save_dir.empty()) {
+        const fs::path dir = fs::path(save_dir) / fs::path(m.file).stem();
+        fs::create_directories(dir);
+        MeshData out;
+        out.V = tm.V;
+        out.T = tm.T;
+        out.F = tm.boundary;
+        io::write_medit((dir / "tetmesh.mesh").string(), out);
+        out.V = r.X;
+        io::write_medit((dir / "deformed.mesh").string(), out);
+      }
       if (deform_only) {
         std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | | | | | | %d | | %s | %s | %s | %s | %s |\n",
                     m.file.c_str(), (long)tm.T.rows(), dopt.beta, r.iterations, r.alpha_steps, r.factorizations,

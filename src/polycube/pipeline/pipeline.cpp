@@ -246,6 +246,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       report["input"]["tets"] = tm.T.rows();
       report["input"]["repairs"]["unreferenced_vertices_removed"] = tr.unreferenced_removed;
       report["input"]["repairs"]["tets_reoriented"] = tr.tets_reoriented;
+      report["input"]["boundary_order"] = tr.boundary_in_file_order ? "file_triangles" : "tets";
       if (tr.tets_reoriented) report["input"]["repaired"] = true;
       surface.V = bm.V;
       surface.F = bm.F;

@@ -132,6 +132,49 @@ TetMesh prepare_tet_input(const MeshData& m, TetInputReport& rep) {
     throw Error(ErrorKind::InvalidMesh, os.str());
   }
   tm.boundary = tet_boundary(tm.T, name);
+  if (m.F.rows() == tm.boundary.rows()) {
+    // The file's triangles in the file's order, if they are the boundary faces (each once).
+    auto key = [](int a, int b, int c) {
+      std::array<int, 3> k{a, b, c};
+      std::sort(k.begin(), k.end());
+      return k;
+    };
+    std::vector<std::pair<std::array<int, 3>, int>> faces(static_cast<size_t>(tm.boundary.rows()));
+    for (int f = 0; f < tm.boundary.rows(); ++f) faces[f] = {key(tm.boundary(f, 0), tm.boundary(f, 1), tm.boundary(f, 2)), f};
+    std::sort(faces.begin(), faces.end());
+    MatX3i B(tm.boundary.rows(), 3);
+    std::vector<char> taken(static_cast<size_t>(tm.boundary.rows()), 0);
+    bool same = true;
+    for (int f = 0; same && f < m.F.rows(); ++f) {
+      std::array<int, 3> r{};
+      for (int k = 0; k < 3; ++k) {
+        const int v = m.F(f, k);
+        r[k] = v >= 0 && v < static_cast<int>(used.size()) ? used[v] : -1;
+      }
+      if (r[0] < 0 || r[1] < 0 || r[2] < 0) {
+        same = false;
+        break;
+      }
+      const std::array<int, 3> k = key(r[0], r[1], r[2]);
+      auto it = std::lower_bound(faces.begin(), faces.end(), std::make_pair(k, -1));
+      if (it == faces.end() || it->first != k || taken[it->second]) {
+        same = false;
+        break;
+      }
+      taken[it->second] = 1;
+      const int b = it->second;
+      // Same cyclic order as the outward boundary face: the file's rotation; otherwise the outward face.
+      bool outward = false;
+      for (int s = 0; s < 3; ++s)
+        outward = outward || (r[0] == tm.boundary(b, s) && r[1] == tm.boundary(b, (s + 1) % 3) &&
+                              r[2] == tm.boundary(b, (s + 2) % 3));
+      for (int c = 0; c < 3; ++c) B(f, c) = outward ? r[c] : tm.boundary(b, c);
+    }
+    if (same) {
+      tm.boundary = B;
+      rep.boundary_in_file_order = true;
+    }
+  }
   return tm;
 }
 

@@ -31,11 +31,17 @@ struct TetInputReport {
   int unreferenced_removed = 0;
   int tets_reoriented = 0;  ///< all tets were negatively oriented and have been flipped
   std::vector<int> vertex_map;  ///< new index of every input vertex (-1: unreferenced, removed)
+  /// The file's triangles are exactly the boundary faces: the boundary keeps their order.
+  bool boundary_in_file_order = false;
 };
 
 /// Turns a tet-mesh input into a checked TetMesh: unreferenced vertices removed, a globally
 /// negative orientation flipped; refuses non-finite coordinates, inverted or flat tets among
 /// positive ones, faces shared by 3+ tets. The boundary is not validated here (see pipeline).
+/// When the file's triangles (m.F) are exactly the boundary faces, the boundary follows their order
+/// and, where a triangle faces outward, its vertex order: a tet mesh this tool wrote
+/// (OUTDIR/tetmesh.mesh) then gives back the run's boundary, and with it the same results, and
+/// labels come in the file's triangle order. Otherwise it is tet_boundary's order.
 TetMesh prepare_tet_input(const MeshData& m, TetInputReport& rep);
 
 }  // namespace polycube
