@@ -272,6 +272,11 @@ int main(int argc, char** argv) {
                  "(the step's riser vanishes instead of getting a layer of flat hexes or a row of sliver quads); "
                  "0 = every step keeps a cell")
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
+  app.add_option("--thin-step-retry", hx.thin_step_retry_below,
+                 "Hex mesh: a result whose worst hex is under this scaled Jacobian next to planes closer than 0.05 "
+                 "(then 0.25) cells is extracted again with those steps merged, kept when better (0 = only when "
+                 "hexes are inverted)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--grading", hx.grading.strength,
                  "Hex mesh (and surface-mode quads when given): sheets of hexes denser where cells would cut the "
                  "curved surface more (exponent on the measure: 0 = uniform grid, as the paper's; 1 = full)")

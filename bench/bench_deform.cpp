@@ -274,14 +274,14 @@ int main(int argc, char** argv) {
         // After boundary-edge collapses the polycube's triangles are map_triangles (B without theirs).
         const MatX3i mt = e.map_triangles(tm.boundary);
         const std::vector<int> ml = e.map_triangle_labels();
-        hex::HexResult h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
+        hex::HexResult h = hex::hex_mesh_thin_step_retries(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
         // The paper's counts are of the whole mesh; ours with pillowing add a boundary layer to the
         // grid's: aim the grid so that the total comes within 5% of the paper's (two more tries).
         const int paper_total = q1 == "-" ? 0 : std::stoi(q1);
         double hex_seconds = h.seconds;
         for (int k = 0; k < 2 && paper_total > 0 && std::abs(h.quality.count - paper_total) > 0.05 * paper_total; ++k) {
           ho.target_hexes = std::max(1, static_cast<int>(std::lround(ho.target_hexes * static_cast<double>(paper_total) / h.quality.count)));
-          h = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
+          h = hex::hex_mesh_thin_step_retries(rr.rest, rr.T, rr.X, mt, ml, &target, ho);
           hex_seconds = h.seconds;
         }
         const hex::Hausdorff hd = hex::hausdorff(h.V, hex::triangulate_quads(hex::boundary_quads(h.H)), tm.V, tm.boundary);

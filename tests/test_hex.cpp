@@ -312,6 +312,50 @@ TEST(Hex, AThinStepLosesItsRiserInsteadOfGettingASquashedLayerOfHexes) {
   EXPECT_LT(shortest_edge(q), 0.02);
 }
 
+TEST(Hex, ThinStepRetriesMergeThickerStepsAndKeepTheBetterResult) {
+  // The squashed l_bracket of the test above (a step of 0.06 cell), every step kept a cell apart.
+  const MeshData l = examples::make("l_bracket", 0.1);
+  const TetMesh tm = tet_mesh_of(l.V, l.F);
+  MatX3d X = tm.V;
+  for (int v = 0; v < X.rows(); ++v)
+    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.01 * (X(v, 2) - 0.5);
+  const std::vector<int> labels = chart::label_by_normal(X, tm.boundary);
+  const SurfaceMesh target{X, tm.boundary};
+  hex::HexOptions o;
+  o.cells_per_unit = 4;
+  o.pillow = "off";
+  o.merge_thin_steps = 0;
+  const hex::HexResult kept = hex::hex_mesh_from_polycube(X, tm.T, X, tm.boundary, labels, &target, o);
+  ASSERT_EQ(kept.quality.inverted, 0);
+  ASSERT_NEAR(kept.min_slab_ratio, 0.06, 1e-9);
+  // Its worst hex is above the default floor (0.3): no retry, the same mesh.
+  ASSERT_GT(kept.quality.sj_min, o.thin_step_retry_below);
+  std::vector<hex::ThinStepRetry> retries;
+  double used = -1;
+  hex::HexResult r = hex::hex_mesh_thin_step_retries(X, tm.T, X, tm.boundary, labels, &target, o, &retries, &used);
+  EXPECT_TRUE(retries.empty());
+  EXPECT_EQ(used, 0.0);
+  EXPECT_EQ(r.quality.count, kept.quality.count);
+  EXPECT_EQ(r.quality.sj_min, kept.quality.sj_min);
+  // With a floor above every hex: the 0.05 retry is skipped (the slab is 0.06 cell), the 0.25 one
+  // runs (the step's planes merged: 2 cells in z instead of 3) and is kept only if its worst hex
+  // is higher by 0.05; either way the result is the better of the two.
+  o.thin_step_retry_below = 1.01;
+  hex::HexOptions m = o;
+  m.merge_thin_steps = 0.25;
+  const hex::HexResult merged = hex::hex_mesh_from_polycube(X, tm.T, X, tm.boundary, labels, &target, m);
+  ASSERT_EQ(merged.cells[2], 2);
+  r = hex::hex_mesh_thin_step_retries(X, tm.T, X, tm.boundary, labels, &target, o, &retries, &used);
+  ASSERT_EQ(retries.size(), 1u);
+  EXPECT_EQ(retries[0].thin_steps, 0.0);
+  EXPECT_EQ(retries[0].sj_min, kept.quality.sj_min);
+  const bool better = merged.quality.sj_min > kept.quality.sj_min + 0.05;
+  EXPECT_EQ(retries[0].replaced, better);
+  EXPECT_EQ(used, better ? 0.25 : 0.0);
+  EXPECT_EQ(r.cells[2], better ? 2 : 3);
+  EXPECT_EQ(r.quality.sj_min, std::max(kept.quality.sj_min, better ? merged.quality.sj_min : 0.0));
+}
+
 TEST(Hex, AnOverlappingPolycubeIsRefused) {
   // Two boxes, each a valid polycube, moved so that they overlap: every tet is positive, yet a line
   // along z meets two bottoms in a row. Snapping counts such lines and extraction refuses.

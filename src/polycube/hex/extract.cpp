@@ -503,4 +503,37 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   return r;
 }
 
+HexResult hex_mesh_thin_step_retries(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
+                                     const std::vector<int>& labels, const SurfaceMesh* target, const HexOptions& opt,
+                                     std::vector<ThinStepRetry>* retries,
+                                     double* used_thin_steps, const Hooks& hooks) {
+  HexOptions ho = opt;
+  HexResult hr = hex_mesh_from_polycube(rest, T, X, B, labels, target, ho, hooks);
+  double used = ho.merge_thin_steps;
+  for (double t : {0.05, 0.25}) {
+    const bool inverted = hr.quality.inverted > 0;
+    if (!inverted && !(hr.quality.sj_min < opt.thin_step_retry_below)) break;
+    if (t <= used || !(hr.min_slab_ratio < t)) continue;
+    hooks.warn((inverted ? std::to_string(hr.quality.inverted) + " hexes inverted"
+                         : "worst hex at scaled Jacobian " + std::to_string(hr.quality.sj_min)) +
+               " next to planes " + std::to_string(hr.min_slab_ratio) +
+               " of a cell apart; merging the planes of steps under " + std::to_string(t) +
+               " cells and extracting again");
+    ThinStepRetry rec{used, hr.quality.inverted, hr.quality.sj_min, false};
+    ho.merge_thin_steps = t;
+    HexResult again = hex_mesh_from_polycube(rest, T, X, B, labels, target, ho, hooks);
+    rec.replaced = again.quality.inverted < hr.quality.inverted ||
+                   (again.quality.inverted == hr.quality.inverted && again.quality.sj_min > hr.quality.sj_min + 0.05);
+    hooks.debug("thin steps " + std::to_string(t) + ": " + std::to_string(again.quality.inverted) +
+                " inverted, worst hex " + std::to_string(again.quality.sj_min) + (rec.replaced ? ", kept" : ", not kept"));
+    if (rec.replaced) {
+      hr = std::move(again);
+      used = t;
+    }
+    if (retries) retries->push_back(rec);
+  }
+  if (used_thin_steps) *used_thin_steps = used;
+  return hr;
+}
+
 }  // namespace polycube::hex

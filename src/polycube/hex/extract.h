@@ -68,6 +68,10 @@ struct HexOptions {
   /// merged); spot: 3 merged, mean and Hausdorff a little better; rod, fandisk: no step that thin
   /// (rod at 0.25: 0.673 against 0.702). 0 = every step keeps a cell.
   double merge_thin_steps = 0.01;
+  /// hex_mesh_thin_step_retries: a result whose worst hex is under this scaled Jacobian next to
+  /// planes closer than 0.05 (then 0.25) cells is extracted again with those steps merged (0 =
+  /// only when hexes are inverted).
+  double thin_step_retry_below = 0.3;
   /// Creases of the target (chains of edges sharper than sharp_angle_deg with one edge sharper
   /// than capture_angle_deg) that no boundary quad edge follows: a variant of the chosen mesh moves
   /// the nearest path of boundary vertices onto each and keeps it there (geometry/feature_capture.h);
@@ -123,5 +127,24 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                                  const std::vector<int>& labels, const SurfaceMesh* target, const HexOptions& opt = {},
                                  const Hooks& hooks = {});
 
+/// One more extraction with thicker steps merged (hex_mesh_thin_step_retries).
+struct ThinStepRetry {
+  double thin_steps = 0;  ///< HexOptions::merge_thin_steps of the result it replaced or not
+  int inverted = 0;       ///< that result's inverted hexes
+  double sj_min = 0;      ///< and its worst scaled Jacobian
+  bool replaced = false;  ///< the retry was better (fewer inverted hexes, then a worst hex higher by 0.05+)
+};
+
+/// hex_mesh_from_polycube, extracted again with the planes of thicker steps merged (merge_thin_steps
+/// 0.05, then 0.25) while the result has inverted hexes or a worst scaled Jacobian under
+/// opt.thin_step_retry_below next to planes closer than that many cells (min_slab_ratio): a riser far thinner
+/// than a hex gets a row of strip-like boundary quads, whose hexes fold or nearly so. A retry is kept
+/// only when better. Measured: bumpy torus (Table II's setting, bench polycube, 28557 grid hexes):
+/// min 0.005 (slab 0.023 cells kept) -> 0.715 at 0.05, Hausdorff 4.1e-3 -> 6.0e-3 (the riser's
+/// planes merged). `used_thin_steps` (optional): merge_thin_steps of the result returned.
+HexResult hex_mesh_thin_step_retries(const MatX3d& rest, const MatX4i& T, const MatX3d& X, const MatX3i& B,
+                                     const std::vector<int>& labels, const SurfaceMesh* target, const HexOptions& opt,
+                                     std::vector<ThinStepRetry>* retries = nullptr,
+                                     double* used_thin_steps = nullptr, const Hooks& hooks = {});
 
 }  // namespace polycube::hex

@@ -841,22 +841,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.report("hex", 0);
         hooks.info("extracting hexes");
         hex::HexOptions ho = opt.hex;
-        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
-        // Hexes left inverted where planes far closer than a cell were kept a cell apart: merge the
-        // planes of thicker steps and extract again (bumpy torus at 29000 grid hexes with
-        // --thin-steps 0: 6 inverted, valid once merged).
+        // Hexes inverted or poor next to planes far closer than a cell (a riser kept a cell
+        // wide): the planes of thicker steps merged, extracted again, kept when better.
+        std::vector<hex::ThinStepRetry> tries;
+        hex::HexResult hr = hex::hex_mesh_thin_step_retries(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, &tries,
+                                                            &ho.merge_thin_steps, hooks);
         json retries = json::array();
-        for (double t : {0.05, 0.25}) {
-          if (hr.quality.inverted == 0) break;
-          if (t <= ho.merge_thin_steps || !(hr.min_slab_ratio < t)) continue;
-          hooks.warn(std::to_string(hr.quality.inverted) + " hexes inverted next to planes " +
-                     std::to_string(hr.min_slab_ratio) + " of a cell apart; merging the planes of steps under " +
-                     std::to_string(t) + " cells and extracting again");
-          retries.push_back({{"thin_steps", ho.merge_thin_steps}, {"inverted", hr.quality.inverted},
-                             {"sj_min", hr.quality.sj_min}});
-          ho.merge_thin_steps = t;
-          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
-        }
+        for (const auto& t : tries)
+          retries.push_back({{"thin_steps", t.thin_steps}, {"inverted", t.inverted}, {"sj_min", t.sj_min},
+                             {"replaced", t.replaced}});
         if (hr.quality.inverted > 0) {
           std::string why = "; try more hexes (--hexes)";
           if (hr.min_slab_ratio < 0.05)
@@ -906,7 +899,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["fit"] = fit_json(hr.fit, diag);
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
-                         {"thin_steps", opt.hex.merge_thin_steps}, {"fit_rounds", opt.hex.fit.rounds},
+                         {"thin_steps", opt.hex.merge_thin_steps},
+                         {"thin_step_retry_below", opt.hex.thin_step_retry_below}, {"fit_rounds", opt.hex.fit.rounds},
                          {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
                          {"capture_creases", opt.hex.capture_creases},
                          {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
