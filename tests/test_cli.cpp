@@ -642,6 +642,9 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   EXPECT_EQ(b["hex"]["inverted"], 0);
   EXPECT_GT(b["hex"]["sj_min"].get<double>(), 0.5);
   EXPECT_GT(b["hex"]["count"].get<int>(), 5000);
+  // Worst hex above --thin-step-retry (0.3 by default): extracted once.
+  EXPECT_DOUBLE_EQ(b["hex"]["options"]["thin_step_retry_below"].get<double>(), 0.3);
+  EXPECT_TRUE(b["hex"]["retries"].is_array() && b["hex"]["retries"].empty()) << b["hex"]["retries"].dump();
   // The fitting to the surface (on by default) brings the hole's surface closer to the hexes and
   // keeps the worst hex.
   r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --fit-rounds 0 -q -o " + dir +
@@ -678,6 +681,8 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   }
   EXPECT_EQ(bu["hex"]["inverted"], 0);
   EXPECT_EQ(run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --grading -1 -q -o " +
+                    dir + "/bx").code, 2);
+  EXPECT_EQ(run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex --thin-step-retry 1.5 -q -o " +
                     dir + "/bx").code, 2);
   // A map of another mesh is refused, naming the mismatch, and nothing is presented as a result.
   ASSERT_EQ(run_cli("--example sphere --until tet -q -o " + dir + "/c").code, 0);
