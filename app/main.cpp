@@ -272,6 +272,11 @@ int main(int argc, char** argv) {
                  "(the step's riser vanishes instead of getting a layer of flat hexes or a row of sliver quads); "
                  "0 = every step keeps a cell")
       ->capture_default_str()->check(CLI::Range(0.0, 0.9));
+  app.add_option("--max-edge-ratio", hx.max_edge_ratio,
+                 "Hex mesh: the optimization may not take a hex above this edge ratio (longest over shortest edge) "
+                 "unless it lowers it, where the hexes are at scaled Jacobian 0.5 or more (0 = no limit: a little "
+                 "higher worst scaled Jacobian, and pillow hexes squeezed to slivers)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1e6));
   app.add_option("--thin-step-retry", hx.thin_step_retry_below,
                  "Hex mesh: a result whose worst hex is under this scaled Jacobian next to planes closer than 0.05 "
                  "(then 0.25) cells is extracted again with those steps merged, kept when better (0 = only when "

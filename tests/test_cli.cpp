@@ -623,6 +623,30 @@ TEST(Cli, PolycubeFromAGivenDeformation) {
   EXPECT_EQ(r.code, 2) << r.output;
 }
 
+TEST(Cli, HexOptimizationDoesNotSqueezeHexesIntoSlivers) {
+  // The sphere's hexes through the same polycube map, with the default edge-ratio limit of the
+  // optimization (10) and without it (0): the scaled Jacobian does not see a thin box, and without
+  // the limit the optimization squeezed pillow hexes (2026-11-27: edge ratio max 74.0, 72 hexes
+  // over 10; with it 24.8 and 26, min scaled Jacobian 0.725 against 0.748).
+  std::string dir = temp_dir("edge_ratio");
+  ASSERT_EQ(run_cli("--example sphere --until polycube -q -o " + dir + "/a").code, 0);
+  json h[2];
+  for (int k = 0; k < 2; ++k) {
+    const std::string out = dir + (k == 0 ? "/limit" : "/none");
+    RunResult r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex -q -o " + out +
+                          (k == 0 ? "" : " --max-edge-ratio 0"));
+    ASSERT_EQ(r.code, 0) << r.output;
+    h[k] = report(out)["hex"];
+    EXPECT_EQ(h[k]["inverted"], 0);
+    EXPECT_GT(h[k]["sj_min"].get<double>(), 0.6);
+  }
+  EXPECT_DOUBLE_EQ(h[0]["options"]["max_edge_ratio"].get<double>(), 10.0);
+  EXPECT_EQ(h[0]["count"], h[1]["count"]);
+  EXPECT_LT(h[0]["edge_ratio"]["max"].get<double>(), 0.5 * h[1]["edge_ratio"]["max"].get<double>());
+  EXPECT_LT(h[0]["edge_ratio"]["above_10"].get<int>(), h[1]["edge_ratio"]["above_10"].get<int>());
+  EXPECT_GT(h[0]["sj_mean"].get<double>(), h[1]["sj_mean"].get<double>() - 0.005);
+}
+
 TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   std::string dir = temp_dir("given_map");
   ASSERT_EQ(run_cli("--example box_hole -q -o " + dir + "/a").code, 0);

@@ -351,7 +351,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     c.extracted = hex_quality(c.V, c.H);
     Hooks quiet;
     const OptimizeStats os = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), patch.empty() ? nullptr : &patch,
-                                            opt.smooth_iterations, opt.optimize_below,
+                                            opt.smooth_iterations, opt.optimize_below, opt.max_edge_ratio,
                                             report ? hooks : quiet);
     c.moves = os.laplacian_moves + os.optimized_moves;
     if (capture) {
@@ -386,7 +386,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       }
       if (undone > 0) {
         const OptimizeStats again = optimize_hexes(c.V, c.H, fixed, sl, tree.get(), patch.empty() ? nullptr : &patch,
-                                                   opt.smooth_iterations, opt.optimize_below, quiet);
+                                                   opt.smooth_iterations, opt.optimize_below, opt.max_edge_ratio,
+                                                   quiet);
         c.moves += again.laplacian_moves + again.optimized_moves;
       }
     }
@@ -412,7 +413,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       // The inner vertices follow the fitted boundary (it stays where it is).
       if (c.fit.moves > 0 && opt.smooth_iterations > 0)
         optimize_hexes(c.V, c.H, fixed, sl, nullptr, nullptr, std::min(opt.smooth_iterations, 10), opt.optimize_below,
-                       quiet);
+                       opt.max_edge_ratio, quiet);
     }
     c.quality = hex_quality(c.V, c.H);
     c.fixed = fixed;

@@ -44,6 +44,15 @@ struct HexOptions {
   /// only lifts the worst; 0.9 also raises the mean (mambo_B9 at 10k hexes: min 0.50 -> 0.56, mean
   /// 0.905 -> 0.94; block: 0.50 -> 0.58, 0.923 -> 0.935), at about twice the time.
   double optimize_below = 0.9;
+  /// The optimization may not take a hex above this edge ratio (longest over shortest edge) unless
+  /// it lowers that hex's ratio, at vertices whose hexes are all at scaled Jacobian 0.5 or more (the
+  /// scaled Jacobian is 1 on a box however thin, and moves it accepted squeezed pillow hexes to an
+  /// edge 1/500 of their longest). 0 = no limit. Measured (2026-11-27, --polycube-map, limit 10 /
+  /// none): rocker at 24631 grid hexes: edge ratio max 112 / 495, hexes over 10 138 / 351, over 100
+  /// 2 / 21; min scaled Jacobian 0.553 / 0.755, mean 0.9531 / 0.9539, Hausdorff 2.25e-3 / 2.31e-3.
+  /// Bumpy torus at 28557: max 144 / 568, over 10 294 / 920, over 100 4 / 47; 0.534 / 0.638,
+  /// 0.9339 / 0.9364, 5.55e-3 / 5.96e-3.
+  double max_edge_ratio = 10;
   /// One layer of hexes along the boundary (pillowing): every boundary quad gets a hex between it
   /// and an inner copy, so that no hex has two faces on a smooth part of the surface (on a sphere
   /// min scaled Jacobian 0.18 -> 0.53), but hexes along sharp 90-degree edges lose (box: 1 -> 0.7).

@@ -12,6 +12,9 @@ namespace {
 constexpr double kSoftMin = 10;  // sharpness of the soft minimum sum exp(-k sj)
 // Vertices of hexes below this scaled Jacobian may leave their patch (block: min 0.12 -> 0.58).
 constexpr double kCrossPatchBelow = 0.3;
+// The edge-ratio guard (max_edge_ratio) holds for vertices whose worst hex is at least this scaled
+// Jacobian: the others are repaired first.
+constexpr double kGuardAbove = 0.5;
 
 void sort_unique(std::vector<std::vector<int>>& lists) {
   for (auto& l : lists) {
@@ -25,7 +28,7 @@ void sort_unique(std::vector<std::vector<int>>& lists) {
 OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
                              const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
                              const std::vector<int>* surface_patch, int sweeps, double optimize_below,
-                             const Hooks& hooks) {
+                             double max_edge_ratio, const Hooks& hooks) {
   OptimizeStats st;
   const int n = static_cast<int>(V.rows());
   std::vector<std::vector<int>> nb(n), bnb(n), vq(n);
@@ -148,6 +151,28 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       set_worst(h);
     }
   };
+  // Edge-ratio guard (the scaled Jacobian is 1 on a box however thin): a move may not take a hex
+  // of v above max_edge_ratio (longest over shortest edge) unless it lowers that hex's ratio.
+  auto edge_ratio = [&](int h, int j, const Vec3& p) {
+    double lo = 1e300, hi = 0;
+    for (const auto& e : kHexEdges) {
+      const Vec3 a = e[0] == j ? p : Vec3(V.row(H(h, e[0])).transpose());
+      const Vec3 b = e[1] == j ? p : Vec3(V.row(H(h, e[1])).transpose());
+      const double l = (a - b).norm();
+      lo = std::min(lo, l);
+      hi = std::max(hi, l);
+    }
+    return lo > 0 ? hi / lo : 1e300;
+  };
+  auto thins = [&](int v, const Vec3& p) {
+    if (!(max_edge_ratio > 0)) return false;
+    const Vec3 x = V.row(v).transpose();
+    for (const auto& [h, j] : vhj[v]) {
+      const double after = edge_ratio(h, j, p);
+      if (after > max_edge_ratio && after > edge_ratio(h, j, x)) return true;
+    }
+    return false;
+  };
   // Patch of every boundary vertex: that of its closest surface triangle at the start.
   std::vector<int> patch(n, -1);
   if (surface && surface_patch)
@@ -213,7 +238,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       for (double t : {1.0, 0.5, 0.25}) {
         const Vec3 p = place(v, x + t * (c - x));
         eval(v, p, after, false, before);  // below `before`: refused, whatever the rest
-        if (after > before + 1e-9 || (after >= before && after > 0.3)) {
+        if ((after > before + 1e-9 || (after >= before && after > 0.3)) && (before < kGuardAbove || !thins(v, p))) {
           move(v, p);
           ++moves;
           ++st.laplacian_moves;
@@ -259,7 +284,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
         const Vec3 p = place(v, x + step * d, m0 < kCrossPatchBelow);
         double m;
         const double f = eval(v, p, m);
-        if (m > m0 + 1e-9 || (f < f0 && m >= m0)) {
+        if ((m > m0 + 1e-9 || (f < f0 && m >= m0)) && (m0 < kGuardAbove || !thins(v, p))) {
           move(v, p);
           ++moves;
           ++st.optimized_moves;

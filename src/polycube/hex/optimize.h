@@ -28,10 +28,12 @@ struct OptimizeStats {
 /// id per surface triangle): each boundary vertex stays on the patch it starts on (patches bounded
 /// by sharp edges, so that smoothing does not cut a sharp edge; only vertices of hexes below 0.3
 /// may leave it, when the polycube has no hex edge along a sharp edge). optimize_below: pass 2 visits the
-/// vertices whose worst hex is below this scaled Jacobian.
+/// vertices whose worst hex is below this scaled Jacobian. max_edge_ratio (> 0): a move of a vertex
+/// whose hexes are all at scaled Jacobian 0.5 or more may not take one of them above this edge
+/// ratio (longest over shortest edge) unless it lowers that hex's ratio (0 = no such limit).
 OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed,
                              const std::vector<std::array<int, 2>>& slide, const geometry::TriangleTree* surface,
                              const std::vector<int>* surface_patch, int sweeps, double optimize_below = 0.9,
-                             const Hooks& hooks = {});
+                             double max_edge_ratio = 0, const Hooks& hooks = {});
 
 }  // namespace polycube::hex
