@@ -253,16 +253,28 @@ TEST(Hex, ConstrainedSnappingMergesOnlyPlanesThatDoNotFaceEachOther) {
   EXPECT_EQ(c.snapped[0], (std::vector<int>{0, 4, 8, 12}));
 }
 
+namespace {
+// The l_bracket example's tet mesh, and its vertices with the upright leg (z > 0.5) squashed to a
+// hundredth of its height: a step of 0.015 above the foot.
+TetMesh l_bracket_tets() {
+  const MeshData l = examples::make("l_bracket", 0.1);
+  return tet_mesh_of(l.V, l.F);
+}
+MatX3d squash_leg(const MatX3d& V) {
+  MatX3d X = V;
+  for (int v = 0; v < X.rows(); ++v)
+    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.01 * (X(v, 2) - 0.5);
+  return X;
+}
+}  // namespace
+
 TEST(Hex, AThinStepLosesItsRiserInsteadOfGettingASquashedLayerOfHexes) {
   // The l_bracket with its upright leg squashed to 0.015 above the foot: a step of 0.06 cell at 4
   // cells per unit between the foot's top (z = 0.5) and the leg's (z = 0.515). The two planes face
   // no common line, so they may share an integer; kept a cell apart, the layer of hexes above the
   // foot would be squeezed into the 0.06-cell step.
-  const MeshData l = examples::make("l_bracket", 0.1);
-  const TetMesh tm = tet_mesh_of(l.V, l.F);
-  MatX3d X = tm.V;
-  for (int v = 0; v < X.rows(); ++v)
-    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.01 * (X(v, 2) - 0.5);
+  const TetMesh tm = l_bracket_tets();
+  const MatX3d X = squash_leg(tm.V);
   ASSERT_EQ(measure_tets(X, tm.T).inverted, 0);
   ASSERT_EQ(measure_tets(X, tm.T).zero_volume, 0);
   const std::vector<int> labels = chart::label_by_normal(X, tm.boundary);
@@ -314,11 +326,8 @@ TEST(Hex, AThinStepLosesItsRiserInsteadOfGettingASquashedLayerOfHexes) {
 
 TEST(Hex, ThinStepRetriesMergeThickerStepsAndKeepTheBetterResult) {
   // The squashed l_bracket of the test above (a step of 0.06 cell), every step kept a cell apart.
-  const MeshData l = examples::make("l_bracket", 0.1);
-  const TetMesh tm = tet_mesh_of(l.V, l.F);
-  MatX3d X = tm.V;
-  for (int v = 0; v < X.rows(); ++v)
-    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.01 * (X(v, 2) - 0.5);
+  const TetMesh tm = l_bracket_tets();
+  const MatX3d X = squash_leg(tm.V);
   const std::vector<int> labels = chart::label_by_normal(X, tm.boundary);
   const SurfaceMesh target{X, tm.boundary};
   hex::HexOptions o;
