@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <optional>
 #include <sstream>
 
 #include "polycube/core/error.h"
@@ -88,6 +89,42 @@ MatX3i tet_boundary(const MatX4i& T, const std::string& name) {
   return B;
 }
 
+namespace {
+// The file's triangles F (file vertex ids, `used`: their new ids) as the boundary B, in F's order,
+// when they are exactly B's faces, each once: a triangle in B's cyclic order keeps its rotation,
+// another takes B's outward face. Nothing otherwise.
+std::optional<MatX3i> boundary_in_file_order(const MatX3i& F, const std::vector<int>& used, const MatX3i& B) {
+  if (F.rows() != B.rows()) return std::nullopt;
+  auto key = [](std::array<int, 3> k) {
+    std::sort(k.begin(), k.end());
+    return k;
+  };
+  std::vector<std::pair<std::array<int, 3>, int>> faces(static_cast<size_t>(B.rows()));
+  for (int f = 0; f < B.rows(); ++f) faces[f] = {key({B(f, 0), B(f, 1), B(f, 2)}), f};
+  std::sort(faces.begin(), faces.end());
+  MatX3i out(B.rows(), 3);
+  std::vector<char> taken(static_cast<size_t>(B.rows()), 0);
+  for (int f = 0; f < F.rows(); ++f) {
+    std::array<int, 3> r{};
+    for (int k = 0; k < 3; ++k) {
+      const int v = F(f, k);
+      r[k] = v >= 0 && v < static_cast<int>(used.size()) ? used[v] : -1;
+      if (r[k] < 0) return std::nullopt;
+    }
+    const std::array<int, 3> k = key(r);
+    const auto it = std::lower_bound(faces.begin(), faces.end(), std::make_pair(k, -1));
+    if (it == faces.end() || it->first != k || taken[it->second]) return std::nullopt;
+    const int b = it->second;
+    taken[b] = 1;
+    bool outward = false;
+    for (int s = 0; s < 3; ++s)
+      outward = outward || (r[0] == B(b, s) && r[1] == B(b, (s + 1) % 3) && r[2] == B(b, (s + 2) % 3));
+    for (int c = 0; c < 3; ++c) out(f, c) = outward ? r[c] : B(b, c);
+  }
+  return out;
+}
+}  // namespace
+
 TetMesh prepare_tet_input(const MeshData& m, TetInputReport& rep) {
   const std::string name = m.path.empty() ? std::string("input") : m.path;
   TetMesh tm;
@@ -132,48 +169,9 @@ TetMesh prepare_tet_input(const MeshData& m, TetInputReport& rep) {
     throw Error(ErrorKind::InvalidMesh, os.str());
   }
   tm.boundary = tet_boundary(tm.T, name);
-  if (m.F.rows() == tm.boundary.rows()) {
-    // The file's triangles in the file's order, if they are the boundary faces (each once).
-    auto key = [](int a, int b, int c) {
-      std::array<int, 3> k{a, b, c};
-      std::sort(k.begin(), k.end());
-      return k;
-    };
-    std::vector<std::pair<std::array<int, 3>, int>> faces(static_cast<size_t>(tm.boundary.rows()));
-    for (int f = 0; f < tm.boundary.rows(); ++f) faces[f] = {key(tm.boundary(f, 0), tm.boundary(f, 1), tm.boundary(f, 2)), f};
-    std::sort(faces.begin(), faces.end());
-    MatX3i B(tm.boundary.rows(), 3);
-    std::vector<char> taken(static_cast<size_t>(tm.boundary.rows()), 0);
-    bool same = true;
-    for (int f = 0; same && f < m.F.rows(); ++f) {
-      std::array<int, 3> r{};
-      for (int k = 0; k < 3; ++k) {
-        const int v = m.F(f, k);
-        r[k] = v >= 0 && v < static_cast<int>(used.size()) ? used[v] : -1;
-      }
-      if (r[0] < 0 || r[1] < 0 || r[2] < 0) {
-        same = false;
-        break;
-      }
-      const std::array<int, 3> k = key(r[0], r[1], r[2]);
-      auto it = std::lower_bound(faces.begin(), faces.end(), std::make_pair(k, -1));
-      if (it == faces.end() || it->first != k || taken[it->second]) {
-        same = false;
-        break;
-      }
-      taken[it->second] = 1;
-      const int b = it->second;
-      // Same cyclic order as the outward boundary face: the file's rotation; otherwise the outward face.
-      bool outward = false;
-      for (int s = 0; s < 3; ++s)
-        outward = outward || (r[0] == tm.boundary(b, s) && r[1] == tm.boundary(b, (s + 1) % 3) &&
-                              r[2] == tm.boundary(b, (s + 2) % 3));
-      for (int c = 0; c < 3; ++c) B(f, c) = outward ? r[c] : tm.boundary(b, c);
-    }
-    if (same) {
-      tm.boundary = B;
-      rep.boundary_in_file_order = true;
-    }
+  if (auto B = boundary_in_file_order(m.F, used, tm.boundary)) {
+    tm.boundary = std::move(*B);
+    rep.boundary_in_file_order = true;
   }
   return tm;
 }
