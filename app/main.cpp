@@ -331,6 +331,10 @@ int main(int argc, char** argv) {
   bool no_creases = false;
   app.add_flag("--no-crease-capture", no_creases,
                "Quad mesh: do not move quad edges onto the creases of the input that no polycube edge follows");
+  app.add_flag("--compare-starts,!--no-compare-starts", opt.quad.compare_starts,
+               "Surface mode, quads: when two realization starts both give a polycube, extract quads from both and "
+               "keep the better (closer to the surface at a similar quality)")
+      ->capture_default_str();
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");

@@ -102,19 +102,20 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only, 
                     p[1].c_str(), p[2].c_str(), p[3].c_str());
         continue;
       }
-      const MatX3i& F = e.map_triangles(s.F);
-      double area = 0;
-      for (int f = 0; f < F.rows(); ++f) area += deform::area_normal(e.realized.X, F(f, 0), F(f, 1), F(f, 2)).norm();
-      const quad::QuadResult q =
-          quad::quad_mesh_from_surface_polycube(s.V, F, e.realized.X, e.map_triangle_labels(), std::sqrt(target / area), s);
+      // As the CLI: quads from each start's polycube the extraction holds, the better kept.
+      const Stopwatch quad_clock;
+      const std::vector<quad::StartQuads> starts = quad::surface_quads_best_start(e, s.V, s.F, target, s);
+      const double quad_seconds = quad_clock.seconds();
+      const quad::StartQuads& kept = *std::find_if(starts.begin(), starts.end(), [](const auto& c) { return c.kept; });
+      const quad::QuadResult& q = kept.quads;
       const hex::Hausdorff hd = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), s.V, s.F);
       Eigen::AlignedBox3d box;
       for (int v = 0; v < s.V.rows(); ++v) box.extend(s.V.row(v).transpose());
       std::printf("| %s | %ld | %.1f | %.1f | %d | %.4f | %d | %.3f / %.3f / %.3f | %d | %.3g / %d | %.2f | %.3f | %d / %d | %.2f | %s | %s | %s | %s |\n",
-                  m.file.c_str(), (long)s.F.rows(), r.seconds, extraction_seconds, e.charts.corners, e.realized.arap, q.quality.count, q.quality.sj_min,
+                  m.file.c_str(), (long)s.F.rows(), r.seconds, extraction_seconds, e.charts.corners, kept.polycube_arap, q.quality.count, q.quality.sj_min,
                   q.quality.sj_mean, q.quality.sj_max, q.quality.inverted, q.quality.edge_ratio_max,
                   q.quality.edge_ratio_above_10, 1e3 * hd.max / box.diagonal().norm(),
-                  1e3 * hd.rms() / box.diagonal().norm(), q.crease_captured, q.crease_runs, q.seconds, p[0].c_str(), p[1].c_str(), p[2].c_str(), p[3].c_str());
+                  1e3 * hd.rms() / box.diagonal().norm(), q.crease_captured, q.crease_runs, quad_seconds, p[0].c_str(), p[1].c_str(), p[2].c_str(), p[3].c_str());
     } catch (const Error& err) {
       std::printf("| %s | error: %s |\n", m.file.c_str(), err.what());
     }

@@ -377,6 +377,76 @@ TEST(SurfaceQuads, HemisphereKeepsItsBorderLoop) {
   for (int v = 0; v < q.V.rows(); ++v) EXPECT_NEAR(q.V.row(v).norm(), 1.0, 0.02);
 }
 
+TEST(SurfaceQuads, BetterQuadsAreCloserToTheSurfaceAtASimilarQuality) {
+  quad::QuadQuality a;
+  a.sj_min = 0.30;
+  a.sj_mean = 0.95;
+  quad::QuadQuality b = a;
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 1.0));
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 0.99)) << "closer by 1% only";
+  EXPECT_TRUE(quad::better_quads(a, 1.0, b, 0.9));
+  b.sj_min = 0.26;  // more than 10% of the minimum given up
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 0.5));
+  b.sj_min = 0.28;
+  b.sj_mean = 0.92;  // 0.03 of the mean given up
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 0.5));
+  b.sj_mean = 0.94;
+  EXPECT_TRUE(quad::better_quads(a, 1.0, b, 0.5));
+  b.inverted = 1;  // a folded quad loses whatever the distance
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 0.1));
+  EXPECT_TRUE(quad::better_quads(b, 0.1, a, 1.0));
+}
+
+// Two polycubes of one layout (ExtractOptions::repair_deformed_start keeps the other start's as
+// PolycubeExtraction::alternative): quads are extracted from both and the better kept, whichever of
+// the two the extraction itself kept.
+TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
+  const auto s = sphere(3);
+  chart::PolycubeExtraction e = surface_polycube(s);
+  ASSERT_TRUE(e.realized.success) << e.realized.failure;
+  EXPECT_FALSE(e.alternative) << "the sphere's deformed start realizes its layout";
+  // A worse map of the same layout: each axis warped by a monotone cubic (planes stay planes and
+  // the polycube exact) crowds the grid lines to one side of the sphere.
+  chart::PolycubeExtraction warped = e;
+  MatX3d& X = warped.realized.X;
+  for (int k = 0; k < 3; ++k) {
+    const double lo = X.col(k).minCoeff(), hi = X.col(k).maxCoeff();
+    for (int v = 0; v < X.rows(); ++v) {
+      const double t = (X(v, k) - lo) / (hi - lo);
+      X(v, k) = lo + (hi - lo) * (0.15 * t + 0.85 * t * t * t);
+    }
+  }
+  const int target = 300;
+  chart::PolycubeExtraction both = e;
+  both.alternative = std::make_shared<const chart::PolycubeExtraction>(warped);
+  const auto a = quad::surface_quads_best_start(both, s.V, s.F, target, s);
+  ASSERT_EQ(a.size(), 2u);
+  EXPECT_FALSE(a[0].alternative);
+  EXPECT_TRUE(a[1].alternative);
+  EXPECT_LT(a[0].hausdorff, 0.98 * a[1].hausdorff);
+  EXPECT_TRUE(a[0].kept);
+  EXPECT_FALSE(a[1].kept);
+  // The other way round: the warped polycube is the extraction's, the even one its alternative.
+  chart::PolycubeExtraction swapped = warped;
+  swapped.alternative = std::make_shared<const chart::PolycubeExtraction>(e);
+  const auto b = quad::surface_quads_best_start(swapped, s.V, s.F, target, s);
+  ASSERT_EQ(b.size(), 2u);
+  EXPECT_FALSE(b[0].kept);
+  EXPECT_TRUE(b[1].kept);
+  EXPECT_EQ(b[1].quads.Q, a[0].quads.Q) << "the same polycube gives the same quads";
+  EXPECT_EQ(b[1].quads.V, a[0].quads.V);
+  // Off: the extraction's own polycube alone.
+  quad::QuadOptions off;
+  off.compare_starts = false;
+  const auto c = quad::surface_quads_best_start(swapped, s.V, s.F, target, s, off);
+  ASSERT_EQ(c.size(), 1u);
+  EXPECT_TRUE(c[0].kept);
+  EXPECT_EQ(c[0].quads.V, b[0].quads.V);
+  std::printf("even map: %d quads, min %.3f mean %.3f, Hausdorff %.4f; warped: %d, %.3f, %.3f, %.4f\n",
+              a[0].quads.quality.count, a[0].quads.quality.sj_min, a[0].quads.quality.sj_mean, a[0].hausdorff,
+              a[1].quads.quality.count, a[1].quads.quality.sj_min, a[1].quads.quality.sj_mean, a[1].hausdorff);
+}
+
 // ---- CLI ------------------------------------------------------------------------------------
 
 TEST(SurfaceCli, OpenHemisphereGivesQuadsWithItsBorder) {

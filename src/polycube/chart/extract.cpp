@@ -595,14 +595,19 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     ro.surface_starts = 1;
     e.realized = realize_polycube(rest, T, B, deformed, e.labels, ro, hooks);
     repair_surface();
+    if (e.realized.success) e.realized.start = "surface_deformed_repaired";
     if (e.realized.success && e.realized.arap < later.realized.arap) {
       hooks.debug("the deformed start, repaired: ARAP " + std::to_string(e.realized.arap) + " against " +
                   std::to_string(later.realized.arap) + " from the " + later.realized.start + " start: kept");
+      e.alternative = std::make_shared<const PolycubeExtraction>(std::move(later));
     } else {
       hooks.debug("the deformed start, repaired: " +
                   (e.realized.success ? "ARAP " + std::to_string(e.realized.arap) : e.realized.failure) + "; the " +
                   later.realized.start + " start's polycube kept (ARAP " + std::to_string(later.realized.arap) + ")");
+      PolycubeExtraction deformed_start = std::move(e);
       e = std::move(later);
+      if (deformed_start.realized.success)
+        e.alternative = std::make_shared<const PolycubeExtraction>(std::move(deformed_start));
     }
   }
   bool retried = false;

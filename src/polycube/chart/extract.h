@@ -1,6 +1,7 @@
 // The polycube stage as one call: label the deformed boundary, clean the labels up, check the
 // chart graph, realize the exact polycube (labeling.h, realize.h).
 #pragma once
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -86,6 +87,12 @@ struct PolycubeExtraction {
   /// The map's triangles and their labels: map_B / map_labels when repaired, else B / labels.
   const MatX3i& map_triangles(const MatX3i& B) const { return map_B.rows() > 0 ? map_B : B; }
   const std::vector<int>& map_triangle_labels() const { return map_B.rows() > 0 ? map_labels : labels; }
+  /// Surface mode (ExtractOptions::repair_deformed_start): when both the repaired deformed start
+  /// and a later start realized the layout, the one not kept (the higher ARAP distortion), with its
+  /// own map triangles; null otherwise. ARAP does not rank the quads the two give: fandisk at 724
+  /// quads, Hausdorff 6.76e-3 from the repaired deformed start (ARAP 0.035) against 3.80e-3 from
+  /// the harmonic start (0.097); quad::surface_quads_best_start extracts both and keeps the better.
+  std::shared_ptr<const PolycubeExtraction> alternative;
 };
 
 /// rest/T/B: tet mesh and outward boundary triangles; deformed: the deformation's result.

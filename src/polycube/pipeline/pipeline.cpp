@@ -589,6 +589,38 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
         report["polycube"]["retry"] = {{"reason", first}, {"barrier_weight", w}};
       }
+      // Surface quads are extracted here, before the polycube is written: when the extraction holds
+      // two polycubes (another start's, PolycubeExtraction::alternative), the one whose quads are
+      // better is kept and written (quad::surface_quads_best_start).
+      std::vector<quad::StartQuads> surface_quads;
+      double surface_quad_seconds = 0;
+      if (opt.surface && opt.until == Stage::Quad && ex.realized.success) {
+        const Stopwatch sq;
+        hooks.info("extracting the quad mesh from the surface polycube");
+        const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
+        surface_quads = quad::surface_quads_best_start(ex, tm.V, tm.boundary, target, surface, opt.quad, hooks);
+        if (surface_quads.size() > 1) {
+          json compared = json::array();
+          Eigen::AlignedBox3d box;
+          for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+          for (const quad::StartQuads& c : surface_quads)
+            compared.push_back({{"start", c.start},
+                                {"polycube_arap", c.polycube_arap},
+                                {"quads", c.quads.quality.count},
+                                {"sj_min", c.quads.quality.sj_min},
+                                {"sj_mean", c.quads.quality.sj_mean},
+                                {"inverted", c.quads.quality.inverted},
+                                {"hausdorff_rel", c.hausdorff / box.diagonal().norm()},
+                                {"kept", c.kept}});
+          report["polycube"]["starts_compared"] = compared;
+        }
+        if (surface_quads.size() > 1 && surface_quads[1].kept) {
+          hooks.info("the " + surface_quads[1].start + " start's polycube gives the better quads: kept");
+          chart::PolycubeExtraction alternative = *ex.alternative;
+          ex = std::move(alternative);
+        }
+        surface_quad_seconds = sq.seconds();
+      }
       const chart::RealizeResult& rr = ex.realized;
       json& pj = report["polycube"];
       if (!given_map) {
@@ -759,7 +791,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         report["tetmesh"]["realization_edges_split"] = rr.split_edges;
         report["tetmesh"]["realization_faces_split"] = rr.split_faces;
       }
-      report["timings"]["polycube"] = sp.seconds();
+      report["timings"]["polycube"] = sp.seconds() - surface_quad_seconds;
       hooks.info("polycube: " + std::to_string(ex.charts.charts) + " charts, " + std::to_string(ex.charts.corners) +
                  " corners, ARAP " + std::to_string(rr.arap) + ", max isometric distortion " +
                  std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
@@ -772,8 +804,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         return a;
       };
       // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
-      auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, const json& grid,
-                             const json& extra) {
+      // seconds: the quad stage's so far.
+      auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, double seconds_before,
+                             const json& grid, const json& extra) {
         if (qr.quality.inverted > 0)
           throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
                                                " quads are folded or degenerate (min scaled Jacobian " +
@@ -821,9 +854,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                        {"max_gap_before_rel", qr.creases_before.max_gap / box.diagonal().norm()},
                                        {"max_gap_after_rel", qr.creases_after.max_gap / box.diagonal().norm()}}},
                           {"grid", grid},
-                          {"seconds", sq.seconds()}};
+                          {"seconds", seconds_before + sq.seconds()}};
         report["quad"].update(extra);
-        report["timings"]["quad"] = sq.seconds();
+        report["timings"]["quad"] = seconds_before + sq.seconds();
         hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
                    std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
                    ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " (RMS " +
@@ -922,12 +955,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (opt.until == Stage::Quad && opt.surface) {
         Stopwatch sq;
         hooks.report("quad", 0);
-        hooks.info("extracting the quad mesh from the surface polycube");
-        const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
-        const double cpu = std::sqrt(target / polycube_area());
-        const quad::QuadResult qr =
-            quad::quad_mesh_from_surface_polycube(tm.V, PB, rr.X, PL, cpu, surface, opt.quad, hooks);
-        write_quads(qr, ex.charts.corners, sq,
+        const auto kept = std::find_if(surface_quads.begin(), surface_quads.end(),
+                                       [](const quad::StartQuads& c) { return c.kept; });
+        if (kept == surface_quads.end()) throw Error(ErrorKind::Internal, "surface mode: no quads were extracted");
+        const quad::QuadResult& qr = kept->quads;
+        write_quads(qr, ex.charts.corners, sq, surface_quad_seconds,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
                      {"thin_steps", opt.quad.merge_thin_steps}, {"grading", opt.quad.grading.strength},
@@ -956,7 +988,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
           report_grid_optimized = true;
         }
-        write_quads(qr, ex.charts.corners, sq,
+        write_quads(qr, ex.charts.corners, sq, 0,
                     {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
                      {"optimized", report_grid_optimized}},
                     json::object());

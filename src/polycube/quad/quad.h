@@ -6,8 +6,10 @@
 // vertices on sharp edges of the input staying put and the others on their smooth patch.
 #pragma once
 #include <array>
+#include <string>
 #include <vector>
 
+#include "polycube/chart/extract.h"
 #include "polycube/core/log.h"
 #include "polycube/core/types.h"
 #include "polycube/geometry/feature_capture.h"
@@ -62,6 +64,10 @@ struct QuadOptions {
   int search_sweeps = 20;
   /// In the fitting, vertices on sharp edges slide along them too (those the smoothing may slide).
   bool fit_slide = true;
+  /// Surface mode: when the polycube extraction holds another start's polycube
+  /// (chart::PolycubeExtraction::alternative), quads are extracted from both and the better ones
+  /// kept (better_quads); false: the extraction's own polycube alone.
+  bool compare_starts = true;
 };
 
 struct QuadResult {
@@ -115,5 +121,29 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
                                            const std::vector<int>& labels, double cells_per_unit,
                                            const SurfaceMesh& target, const QuadOptions& opt = {},
                                            const Hooks& hooks = {});
+
+/// Whether quads b (Hausdorff distance hb to the surface) are better than quads a (ha): fewer
+/// folded or degenerate quads; at as many, b must be closer to the surface by more than 2% without
+/// giving up more than 10% of the minimum scaled Jacobian or 0.02 of the mean (the distance is
+/// what differs most between polycube maps of one layout; the quality is the floor kept).
+bool better_quads(const QuadQuality& a, double ha, const QuadQuality& b, double hb);
+
+/// One polycube's quads in surface_quads_best_start.
+struct StartQuads {
+  std::string start;          ///< the realization's start (chart::RealizeResult::start)
+  double polycube_arap = 0;   ///< its polycube's ARAP distortion
+  bool alternative = false;   ///< from PolycubeExtraction::alternative
+  QuadResult quads;
+  double hausdorff = 0;       ///< two-sided, absolute (hex::hausdorff to `target`)
+  bool kept = false;
+};
+
+/// Surface mode: the quads of the extraction's polycube (e.realized over e.map_triangles(B)) at
+/// about target_quads quads (cells per unit from the polycube's area over B) and, if
+/// opt.compare_starts and e holds an alternative, of that polycube too; the better (better_quads,
+/// the extraction's own first) is flagged `kept`. e.realized.success is required.
+std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction& e, const MatX3d& rest,
+                                                 const MatX3i& B, int target_quads, const SurfaceMesh& target,
+                                                 const QuadOptions& opt = {}, const Hooks& hooks = {});
 
 }  // namespace polycube::quad

@@ -6,6 +6,7 @@
 
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
+#include "polycube/deform/energies.h"
 #include "polycube/hex/snap.h"
 #include "polycube/quad/quad.h"
 
@@ -259,6 +260,43 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
   smooth_on_surface(r, target, opt, hooks, loops.empty() ? std::vector<char>{} : pinned);
   r.seconds = sw.seconds();
   return r;
+}
+
+bool better_quads(const QuadQuality& a, double ha, const QuadQuality& b, double hb) {
+  if (a.inverted != b.inverted) return b.inverted < a.inverted;
+  return hb < 0.98 * ha && b.sj_min >= 0.9 * a.sj_min && b.sj_mean >= a.sj_mean - 0.02;
+}
+
+std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction& e, const MatX3d& rest,
+                                                 const MatX3i& B, int target_quads, const SurfaceMesh& target,
+                                                 const QuadOptions& opt, const Hooks& hooks) {
+  if (!e.realized.success) throw Error(ErrorKind::Internal, "surface_quads_best_start: the polycube was not realized");
+  if (target_quads <= 0) throw Error(ErrorKind::Usage, "surface_quads_best_start: the quad count must be positive");
+  std::vector<const chart::PolycubeExtraction*> polycubes{&e};
+  if (opt.compare_starts && e.alternative && e.alternative->realized.success) polycubes.push_back(e.alternative.get());
+  std::vector<StartQuads> out;
+  for (const chart::PolycubeExtraction* p : polycubes) {
+    double l1 = 0, area = 0;
+    deform::l1_measure(p->realized.X, B, l1, area);
+    StartQuads s;
+    s.start = p->realized.start;
+    s.polycube_arap = p->realized.arap;
+    s.alternative = p != &e;
+    s.quads = quad_mesh_from_surface_polycube(rest, p->map_triangles(B), p->realized.X, p->map_triangle_labels(),
+                                              std::sqrt(target_quads / area), target, opt, hooks);
+    s.hausdorff = hex::hausdorff(s.quads.V, hex::triangulate_quads(s.quads.Q), target.V, target.F).max;
+    if (polycubes.size() > 1)
+      hooks.info("quads from the " + s.start + " start's polycube (ARAP " + std::to_string(s.polycube_arap) +
+                 "): " + std::to_string(s.quads.quality.count) + ", scaled Jacobian min " +
+                 std::to_string(s.quads.quality.sj_min) + " mean " + std::to_string(s.quads.quality.sj_mean) +
+                 ", Hausdorff " + std::to_string(s.hausdorff));
+    out.push_back(std::move(s));
+  }
+  size_t best = 0;
+  for (size_t i = 1; i < out.size(); ++i)
+    if (better_quads(out[best].quads.quality, out[best].hausdorff, out[i].quads.quality, out[i].hausdorff)) best = i;
+  out[best].kept = true;
+  return out;
 }
 
 }  // namespace polycube::quad
