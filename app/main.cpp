@@ -280,7 +280,8 @@ int main(int argc, char** argv) {
   app.add_option("--thin-step-retry", hx.thin_step_retry_below,
                  "Hex mesh: a result whose worst hex is under this scaled Jacobian next to planes closer than 0.05 "
                  "(then 0.25) cells is extracted again with those steps merged, kept when better (0 = only when "
-                 "hexes are inverted)")
+                 "hexes are inverted). Surface-mode quads are extracted again the same way when some have an edge "
+                 "ratio over 100 (0 = not)")
       ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--grading", hx.grading.strength,
                  "Hex mesh (and surface-mode quads when given): sheets of hexes denser where cells would cut the "
@@ -350,6 +351,7 @@ int main(int argc, char** argv) {
   if (no_creases) opt.quad.capture_creases = false;
   opt.quad.sharp_angle_deg = hx.sharp_angle_deg;
   opt.quad.merge_thin_steps = hx.merge_thin_steps;
+  opt.quad.thin_step_retries = hx.thin_step_retry_below > 0;
   // Surface-mode quads are graded only on request (hexes by default).
   if (app.count("--grading") > 0) opt.quad.grading = hx.grading;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;

@@ -8,6 +8,7 @@
 #include "polycube/chart/labeling.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/solver.h"
+#include "polycube/examples/examples.h"
 #include "polycube/quad/quad.h"
 #include "polycube/io/readers.h"
 #include "polycube/io/writers.h"
@@ -445,6 +446,49 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
   std::printf("even map: %d quads, min %.3f mean %.3f, Hausdorff %.4f; warped: %d, %.3f, %.3f, %.4f\n",
               a[0].quads.quality.count, a[0].quads.quality.sj_min, a[0].quads.quality.sj_mean, a[0].hausdorff,
               a[1].quads.quality.count, a[1].quads.quality.sj_min, a[1].quads.quality.sj_mean, a[1].hausdorff);
+}
+
+// The l_bracket with its upright leg squashed to a step 0.00075 high above the foot (0.006 cell at
+// the 7.6 cells per unit of 400 quads): an exact polycube of itself. Every step kept a cell apart (merge_thin_steps 0), the riser gets a row of
+// quads far thinner than long; the thin-step retry merges the step's planes.
+TEST(SurfaceQuads, SliverRowsOverAThinStepAreExtractedAgainWithTheStepMerged) {
+  const MeshData l = examples::make("l_bracket", 0.1);
+  MatX3d X = l.V;
+  for (int v = 0; v < X.rows(); ++v)
+    if (X(v, 2) > 0.5) X(v, 2) = 0.5 + 0.0005 * (X(v, 2) - 0.5);
+  const SurfaceMesh s{X, l.F};
+  chart::PolycubeExtraction e;
+  e.realized.success = true;
+  e.realized.start = "given";
+  e.realized.X = X;
+  e.labels = chart::label_by_normal(X, l.F);
+  quad::QuadOptions o;
+  o.merge_thin_steps = 0;
+  o.thin_step_retries = false;
+  const auto plain = quad::surface_quads_best_start(e, X, l.F, 400, s, o);
+  ASSERT_EQ(plain.size(), 1u);
+  EXPECT_TRUE(plain[0].retries.empty());
+  EXPECT_EQ(plain[0].quads.merged_planes, 0);
+  ASSERT_GT(plain[0].quads.quality.edge_ratio_above_100, 0)
+      << "a row of slivers over the riser: edge ratio max " << plain[0].quads.quality.edge_ratio_max;
+  o.thin_step_retries = true;
+  const auto retried = quad::surface_quads_best_start(e, X, l.F, 400, s, o);
+  ASSERT_EQ(retried.size(), 1u);
+  const quad::StartQuads& r = retried[0];
+  ASSERT_EQ(r.retries.size(), 1u) << "no sliver left after the first retry: no second";
+  EXPECT_EQ(r.retries[0].thin_steps, 0.05);
+  EXPECT_TRUE(r.retries[0].replaced);
+  EXPECT_EQ(r.quads.merged_planes, 1);
+  EXPECT_EQ(r.quads.quality.edge_ratio_above_100, 0);
+  EXPECT_EQ(r.quads.quality.inverted, 0);
+  EXPECT_LT(r.quads.quality.edge_ratio_max, plain[0].quads.quality.edge_ratio_max);
+  // The step's height is the distance it costs (the plain quads lie on the shape).
+  EXPECT_NEAR(r.hausdorff, 0.00075, 1e-5);
+  EXPECT_LT(plain[0].hausdorff, 1e-9);
+  // The rule: fewer slivers, the distance within the slack the merge may cost.
+  EXPECT_TRUE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].hausdorff, r.quads.quality, r.hausdorff, 0.001));
+  EXPECT_FALSE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].hausdorff, r.quads.quality, r.hausdorff, 0.0005));
+  EXPECT_FALSE(quad::fewer_sliver_quads(r.quads.quality, r.hausdorff, plain[0].quads.quality, plain[0].hausdorff, 1.0));
 }
 
 // ---- CLI ------------------------------------------------------------------------------------

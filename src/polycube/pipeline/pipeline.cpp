@@ -959,12 +959,26 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                        [](const quad::StartQuads& c) { return c.kept; });
         if (kept == surface_quads.end()) throw Error(ErrorKind::Internal, "surface mode: no quads were extracted");
         const quad::QuadResult& qr = kept->quads;
+        json retries = json::array();
+        double thin_steps = opt.quad.merge_thin_steps;  // of the quads kept
+        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
+        for (const quad::QuadThinStepRetry& t : kept->retries) {
+          if (t.replaced) thin_steps = t.thin_steps;
+          retries.push_back({{"thin_steps", t.thin_steps},
+                             {"merged_planes", t.merged_planes},
+                             {"edge_ratio_over_10", t.over_10},
+                             {"edge_ratio_max", t.ratio_max},
+                             {"sj_min", t.sj_min},
+                             {"hausdorff_rel", t.hausdorff / diag},
+                             {"replaced", t.replaced}});
+        }
         write_quads(qr, ex.charts.corners, sq, surface_quad_seconds,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
-                     {"thin_steps", opt.quad.merge_thin_steps}, {"grading", opt.quad.grading.strength},
+                     {"thin_steps", thin_steps}, {"grading", opt.quad.grading.strength},
                      {"grading_density_min", qr.grading_min}, {"grading_density_max", qr.grading_max}},
-                    json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices}});
+                    json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices},
+                         {"thin_step_retries", retries}});
       }
       if (opt.until == Stage::Quad && !opt.surface) {
         Stopwatch sq;

@@ -193,7 +193,7 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     if (label % 2) std::swap(q[1], q[3]);  // -k: clockwise in (a, b) is counter-clockwise seen from -k
     quads.push_back(q);
   }
-  if (missing > 0 && r.merged_planes > 0) {
+  if (missing > 0 && r.merged_planes > 0 && opt.unmerge_on_missing_corners) {
     // A merged step whose riser was not thin everywhere (the planes' points no longer match):
     // every plane keeps its cell instead.
     hooks.debug(std::to_string(missing) + " grid squares miss a corner with " + std::to_string(r.merged_planes) +
@@ -203,7 +203,10 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
     return quad_mesh_from_surface_polycube(rest, F, X, labels, cells_per_unit, target, o, hooks);
   }
   if (missing > 0)
-    throw Error(ErrorKind::Polycube, std::to_string(missing) + " grid squares of the surface polycube miss a corner");
+    throw Error(ErrorKind::Polycube, std::to_string(missing) + " grid squares of the surface polycube miss a corner" +
+                                         (r.merged_planes > 0 ? " with " + std::to_string(r.merged_planes) +
+                                                                    " planes of thin steps merged"
+                                                              : std::string()));
   r.Q.resize(static_cast<Eigen::Index>(quads.size()), 4);
   for (size_t q = 0; q < quads.size(); ++q)
     for (int t = 0; t < 4; ++t) r.Q(static_cast<Eigen::Index>(q), t) = quads[q][t];
@@ -267,6 +270,21 @@ bool better_quads(const QuadQuality& a, double ha, const QuadQuality& b, double 
   return hb < 0.98 * ha && b.sj_min >= 0.9 * a.sj_min && b.sj_mean >= a.sj_mean - 0.02;
 }
 
+bool fewer_sliver_quads(const QuadQuality& a, double ha, const QuadQuality& b, double hb, double slack) {
+  if (a.inverted != b.inverted) return b.inverted < a.inverted;
+  return b.edge_ratio_above_10 < a.edge_ratio_above_10 && b.edge_ratio_max < a.edge_ratio_max &&
+         b.sj_min >= 0.9 * a.sj_min && hb <= ha + std::max(0.1 * ha, slack);
+}
+
+namespace {
+double mean_edge(const QuadResult& q) {
+  double sum = 0;
+  for (int f = 0; f < q.Q.rows(); ++f)
+    for (int t = 0; t < 4; ++t) sum += (q.V.row(q.Q(f, t)) - q.V.row(q.Q(f, (t + 1) % 4))).norm();
+  return q.Q.rows() > 0 ? sum / (4.0 * static_cast<double>(q.Q.rows())) : 0.0;
+}
+}  // namespace
+
 std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction& e, const MatX3d& rest,
                                                  const MatX3i& B, int target_quads, const SurfaceMesh& target,
                                                  const QuadOptions& opt, const Hooks& hooks) {
@@ -275,6 +293,8 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
   std::vector<const chart::PolycubeExtraction*> polycubes{&e};
   if (opt.compare_starts && e.alternative && e.alternative->realized.success) polycubes.push_back(e.alternative.get());
   std::vector<StartQuads> out;
+  const double diag = (target.V.colwise().maxCoeff() - target.V.colwise().minCoeff()).norm();
+  auto relative = [&](double h) { return std::to_string(h / diag); };
   for (const chart::PolycubeExtraction* p : polycubes) {
     double l1 = 0, area = 0;
     deform::l1_measure(p->realized.X, B, l1, area);
@@ -282,14 +302,54 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
     s.start = p->realized.start;
     s.polycube_arap = p->realized.arap;
     s.alternative = p != &e;
-    s.quads = quad_mesh_from_surface_polycube(rest, p->map_triangles(B), p->realized.X, p->map_triangle_labels(),
-                                              std::sqrt(target_quads / area), target, opt, hooks);
-    s.hausdorff = hex::hausdorff(s.quads.V, hex::triangulate_quads(s.quads.Q), target.V, target.F).max;
+    auto extract = [&](const QuadOptions& o, double& h) {
+      QuadResult q = quad_mesh_from_surface_polycube(rest, p->map_triangles(B), p->realized.X,
+                                                     p->map_triangle_labels(), std::sqrt(target_quads / area), target,
+                                                     o, hooks);
+      h = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), target.V, target.F).max;
+      return q;
+    };
+    s.quads = extract(opt, s.hausdorff);
+    // Slivers: rows of quads over a riser far thinner than a cell (or where the map crushes the
+    // surface); merging thicker steps removes the former.
+    for (const double thin : {0.05, 0.25}) {
+      if (!opt.thin_step_retries || s.quads.quality.edge_ratio_above_100 == 0 || thin <= opt.merge_thin_steps) continue;
+      QuadOptions o = opt;
+      o.merge_thin_steps = thin;
+      o.unmerge_on_missing_corners = false;
+      QuadThinStepRetry t;
+      t.thin_steps = thin;
+      QuadResult q;
+      try {
+        q = extract(o, t.hausdorff);
+      } catch (const Error& err) {
+        if (err.kind() != ErrorKind::Polycube) throw;
+        hooks.info("quads with steps under " + std::to_string(thin) + " cells merged: " + err.what() + "; not kept");
+        t.merged_planes = -1;
+        s.retries.push_back(t);
+        break;  // thicker steps merged miss corners too
+      }
+      t.merged_planes = q.merged_planes;
+      t.over_10 = q.quality.edge_ratio_above_10;
+      t.ratio_max = q.quality.edge_ratio_max;
+      t.sj_min = q.quality.sj_min;
+      t.replaced = q.merged_planes > s.quads.merged_planes &&
+                   fewer_sliver_quads(s.quads.quality, s.hausdorff, q.quality, t.hausdorff, thin * mean_edge(q));
+      hooks.info("quads with steps under " + std::to_string(thin) + " cells merged (" +
+                 std::to_string(q.merged_planes) + " planes): edge ratio max " + std::to_string(t.ratio_max) + ", " +
+                 std::to_string(t.over_10) + " over 10, scaled Jacobian min " + std::to_string(t.sj_min) +
+                 ", Hausdorff " + relative(t.hausdorff) + (t.replaced ? ": kept" : ": not kept"));
+      if (t.replaced) {
+        s.quads = std::move(q);
+        s.hausdorff = t.hausdorff;
+      }
+      s.retries.push_back(t);
+    }
     if (polycubes.size() > 1)
       hooks.info("quads from the " + s.start + " start's polycube (ARAP " + std::to_string(s.polycube_arap) +
                  "): " + std::to_string(s.quads.quality.count) + ", scaled Jacobian min " +
                  std::to_string(s.quads.quality.sj_min) + " mean " + std::to_string(s.quads.quality.sj_mean) +
-                 ", Hausdorff " + std::to_string(s.hausdorff));
+                 ", Hausdorff " + relative(s.hausdorff) + " of the bbox diagonal");
     out.push_back(std::move(s));
   }
   size_t best = 0;
