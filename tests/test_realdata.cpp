@@ -281,35 +281,6 @@ TEST_P(RealSurfaceQuads, ReachesAnExactSurfacePolycubeAndValidQuads) {
 INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealSurfaceQuads, ::testing::Values("basic/eight.off", "cad/mambo_B3.stl"),
                          test_name);
 
-// cad/fandisk.obj in surface mode at Table I's 724 quads: creases its polycube has no edge along
-// (one fades out inside a face) are cut by the quads (Hausdorff 5.45e-3 without the capture,
-// 2026-11-25); quad edges moved onto them bring it to 4.2e-3. (This test was on cad/joint.obj,
-// whose layout since the Lagrangian Hessian and the area barrier leaves no crease worth a capture:
-// the same 6.55e-3 with or without.)
-TEST(RealSurfaceQuadsCreases, CreasesOfTheFandiskAreCaptured) {
-  const std::string path = shared_dir() + "/meshes/cad/fandisk.obj";
-  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions opt = surface_quad_options(path, "real_surface_creases");
-  opt.target_quads = 724;
-  // The layout whose creases this test was written on: the surface realization's global
-  // untangling rounds first (since 2026-11-27 the local untangling runs first, whose polycube
-  // (ARAP 0.0373 against 0.0461) puts the grid elsewhere: every capture refused, see
-  // FandiskQuadsWithTheDefaultRealization).
-  opt.polycube.realize.local_first = -1;
-  nlohmann::json j = run_pipeline(opt);
-  const auto& q = j["quad"];
-  const auto& c = q["creases"];
-  EXPECT_EQ(q["inverted"], 0);
-  EXPECT_GE(c["captured"].get<int>(), 1) << c.dump();
-  EXPECT_LT(c["max_gap_after_rel"].get<double>(), c["max_gap_before_rel"].get<double>()) << c.dump();
-  EXPECT_GT(c["followed_after"].get<double>(), c["followed_before"].get<double>()) << c.dump();
-  // With the AVX2 kernels every run now uses (core/parallel.h, 2026-11-27): 6.38e-3 and a worst
-  // quad of 0.238 (Table I: 3.82e-3, 0.239). The AVX-512 kernels of the machine this test was
-  // written on gave 3.9-4.2e-3 and 0.254: the same algorithm, other round-off, another layout.
-  EXPECT_LT(q["hausdorff_rel"].get<double>(), 6.5e-3) << q.dump();
-  EXPECT_GT(q["sj_min"].get<double>(), 0.23) << q.dump();
-}
-
 // fandisk at Table I's count with the default realization (local untangling first, 2026-11-27):
 // its polycube realizes in under a second (25 s with the global rounds). The deformed start leaves
 // 2 triangles folded (AVX2 kernels) and the harmonic start realizes the layout at ARAP 0.0974;
@@ -344,7 +315,14 @@ TEST(RealSurfaceQuadsCreases, FandiskQuadsWithTheDefaultRealization) {
   EXPECT_GT(q["sj_min"].get<double>(), 0.239) << q.dump();
   EXPECT_GT(q["sj_mean"].get<double>(), 0.620) << q.dump();
   EXPECT_LT(q["hausdorff_rel"].get<double>(), 3.82e-3) << q.dump();
-  EXPECT_GE(q["creases"]["runs"].get<int>(), 1) << q.dump();
+  // Creases its polycube has no edge along (one fades out inside a face) are cut by the quads;
+  // paths of quad edges moved onto them are kept on the kept polycube's quads (5 of 8 runs).
+  // (This was a test of its own, on the layout of the surface realization's global untangling
+  // rounds, 45 s; the local untangling's layouts and the compared starts made it this one.)
+  const auto& cr = q["creases"];
+  EXPECT_GE(cr["captured"].get<int>(), 1) << cr.dump();
+  EXPECT_LT(cr["max_gap_after_rel"].get<double>(), cr["max_gap_before_rel"].get<double>()) << cr.dump();
+  EXPECT_GT(cr["followed_after"].get<double>(), cr["followed_before"].get<double>()) << cr.dump();
 }
 
 // cad/block in surface mode: steps far thinner than a cell, kept a cell apart by the plain sorted
@@ -357,6 +335,7 @@ TEST(RealSurfaceQuads, ThinStepsOfTheBlockGiveNoSliverRows) {
   auto run = [&](double thin) {
     PipelineOptions opt = surface_quad_options(path, "real_surface_block");
     opt.quad.merge_thin_steps = thin;
+    opt.quad.thin_step_retries = false;  // the plain merge, and the plain slivers without it
     return run_pipeline(opt);
   };
   const nlohmann::json off = run(0), on = run(0.01);

@@ -22,6 +22,9 @@ constexpr double kFreeFeatureBelow = 0.1;
 /// Hausdorff distance 1.55e-3 -> 2.00e-3.)
 constexpr double kPoorQuad = 0.25;
 constexpr double kPoorQuadChordGap = 0.1;
+/// The smoothing widens slivers (QuadOptions::max_edge_ratio) by moves that keep the worst quad
+/// around the vertex at least this (or where it was, if lower).
+constexpr double kSliverFloor = 0.5;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
 constexpr double kCaptureMinQuality = 0.3;
@@ -140,6 +143,23 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return m;
   };
+  // The largest edge ratio of v's quads.
+  auto ratio = [&](int v) {
+    double m = 0;
+    for (int q : vq[v]) {
+      double len[4];
+      for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+      m = std::max(m, hex::edge_ratio(len, 4));
+    }
+    return m;
+  };
+  // Where the worst quad around a vertex is kSliverFloor or more, a move may not take its quads
+  // above QuadOptions::max_edge_ratio unless it lowers their largest ratio (the scaled Jacobian
+  // accepts moves that squeeze quads into slivers; spot: an edge of 6e-5 in a quad 0.2 long).
+  auto ratio_guard = [&](double worst_before, double ratio_before, double ratio_after) {
+    return opt.max_edge_ratio <= 0 || worst_before < kSliverFloor || ratio_after <= opt.max_edge_ratio ||
+           ratio_after < ratio_before;
+  };
   // Feature vertices slide along their sharp edge (to the best of a few positions between their two
   // neighbours on it, projected back on the edge), except at corners of the sharp edges.
   const std::vector<Vec3> corners = geometry::sharp_corners(target, sharp);
@@ -237,11 +257,18 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         c /= static_cast<double>(nb[v].size());
         const Vec3 nrm = quads_normal(v);
         const Vec3 x = r.V.row(v).transpose();
+        // Slivers (QuadOptions::max_edge_ratio): their scaled Jacobian may be near 1, so a move
+        // that widens one may lower the worst quad a little, down to kSliverFloor.
+        const double ratio_before = opt.max_edge_ratio > 0 ? ratio(v) : 0;
+        const bool sliver = opt.max_edge_ratio > 0 && ratio_before > opt.max_edge_ratio;
         for (double t : {1.0, 0.5, 0.25}) {
           const Vec3 p = onto_surface(v, x + t * (c - x), nrm, cross);
           r.V.row(v) = p.transpose();
           const double after = worst(v);
-          if (after > before + 1e-9 || (after >= before && after > 0.3)) {
+          const double ratio_after = opt.max_edge_ratio > 0 ? ratio(v) : 0;
+          if (((after > before + 1e-9 || (after >= before && after > 0.3)) &&
+               ratio_guard(before, ratio_before, ratio_after)) ||
+              (sliver && after >= std::min(before, kSliverFloor) && ratio_after < 0.9 * ratio_before)) {
             ++moves;
             break;
           }
@@ -283,6 +310,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         const bool cross = before < kCrossPatchBelow;
         double best_q = before;
         Vec3 best_p = x;
+        const double ratio_before = opt.max_edge_ratio > 0 ? ratio(v) : 0;
         for (double step : {0.2, 0.1, 0.05, 0.025}) {
           for (int k = 0; k < 16; ++k) {
             const double a = k * M_PI / 8;
@@ -290,7 +318,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
             const Vec3 p = onto_surface(v, y, nrm, cross);
             r.V.row(v) = p.transpose();
             const double q = worst(v);
-            if (q > best_q + 1e-9) best_q = q, best_p = p;
+            if (q > best_q + 1e-9 && ratio_guard(q, ratio_before, opt.max_edge_ratio > 0 ? ratio(v) : 0))
+              best_q = q, best_p = p;
           }
         }
         r.V.row(v) = best_p.transpose();

@@ -29,6 +29,10 @@ QuadQuality quad_quality(const MatX3d& V, const MatX4i& Q);
 
 struct QuadOptions {
   int smooth_iterations = 30;    ///< smoothing sweeps on the surface (0 = off)
+  /// The smoothing also takes moves that lower the largest edge ratio of a vertex's quads above
+  /// this by 10%+, if its worst quad stays at 0.5 or more (or where it was); the scaled Jacobian
+  /// is near 1 on a thin rectangle, so it alone never widens one. 0 = off.
+  double max_edge_ratio = 10;
   /// Surface mode: consecutive chart planes of an axis less than this many cells apart that do
   /// not face each other share one integer (their risers lose their height), as
   /// HexOptions::merge_thin_steps; kept a cell apart, such a step gives a row of quads a fraction
