@@ -214,7 +214,11 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         if (poor_only && !(fixed[v] && before > kFreeFeatureBelow && before < kPoorQuad)) continue;
         if (fixed[v] && before > kFreeFeatureBelow) {
           int a, b;
-          if (before >= opt.slide_below || !slide_ends(v, a, b)) continue;
+          // A sliver's vertex slides too, to the position of the lowest edge ratio (by 10%+) that
+          // keeps its worst quad at kSliverFloor or where it was.
+          const double ratio_before = opt.max_edge_ratio > 0 && !poor_only ? ratio(v) : 0;
+          const bool sliver = ratio_before > opt.max_edge_ratio && opt.max_edge_ratio > 0;
+          if ((before >= opt.slide_below && !sliver) || !slide_ends(v, a, b)) continue;
           // The best of a few positions along the edge (towards either neighbour), projected on it.
           // The two quad edges must not cut the sharp edge more than before (curved sharp edges).
           const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
@@ -235,20 +239,23 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           // so only a longer arc (a larger sagitta) opens it (0.233 -> 0.280).
           const double gap_limit = std::max(chord_gap(x), (poor_only ? kPoorQuadChordGap : 0.05) * elen);
           Vec3 best_p = x;
-          double best_q = before;
+          double best_q = before, best_ratio = ratio_before;
           for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
             Vec3 p;
             if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
             if (chord_gap(p) > gap_limit) continue;
             r.V.row(v) = p.transpose();
             const double q = worst(v);
-            if (q > best_q + 1e-9) {
+            if (sliver) {
+              const double rr = ratio(v);
+              if (q >= std::min(before, kSliverFloor) && rr < 0.9 * best_ratio) best_ratio = rr, best_q = q, best_p = p;
+            } else if (q > best_q + 1e-9) {
               best_q = q;
               best_p = p;
             }
           }
           r.V.row(v) = best_p.transpose();
-          moves += best_q > before;
+          moves += best_p != x;
           continue;
         }
         const bool cross = before < kCrossPatchBelow;
