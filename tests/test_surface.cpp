@@ -418,9 +418,14 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
     }
   }
   const int target = 300;
-  chart::PolycubeExtraction both = e;
-  both.alternative = std::make_shared<const chart::PolycubeExtraction>(warped);
-  const auto a = quad::surface_quads_best_start(both, s.V, s.F, target, s);
+  // The quads of `own` with `other` as its alternative.
+  auto compared = [&](const chart::PolycubeExtraction& own, const chart::PolycubeExtraction& other,
+                      const quad::QuadOptions& o = {}) {
+    chart::PolycubeExtraction x = own;
+    x.alternative = std::make_shared<const chart::PolycubeExtraction>(other);
+    return quad::surface_quads_best_start(x, s.V, s.F, target, s, o);
+  };
+  const auto a = compared(e, warped);
   ASSERT_EQ(a.size(), 2u);
   EXPECT_FALSE(a[0].alternative);
   EXPECT_TRUE(a[1].alternative);
@@ -428,9 +433,7 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
   EXPECT_TRUE(a[0].kept);
   EXPECT_FALSE(a[1].kept);
   // The other way round: the warped polycube is the extraction's, the even one its alternative.
-  chart::PolycubeExtraction swapped = warped;
-  swapped.alternative = std::make_shared<const chart::PolycubeExtraction>(e);
-  const auto b = quad::surface_quads_best_start(swapped, s.V, s.F, target, s);
+  const auto b = compared(warped, e);
   ASSERT_EQ(b.size(), 2u);
   EXPECT_FALSE(b[0].kept);
   EXPECT_TRUE(b[1].kept);
@@ -439,7 +442,7 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
   // Off: the extraction's own polycube alone.
   quad::QuadOptions off;
   off.compare_starts = false;
-  const auto c = quad::surface_quads_best_start(swapped, s.V, s.F, target, s, off);
+  const auto c = compared(warped, e, off);
   ASSERT_EQ(c.size(), 1u);
   EXPECT_TRUE(c[0].kept);
   EXPECT_EQ(c[0].quads.V, b[0].quads.V);
