@@ -173,6 +173,12 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
     }
     return false;
   };
+  // The largest edge ratio of v's hexes with v at p.
+  auto max_ratio = [&](int v, const Vec3& p) {
+    double m = 0;
+    for (const auto& [h, j] : vhj[v]) m = std::max(m, edge_ratio(h, j, p));
+    return m;
+  };
   // Patch of every boundary vertex: that of its closest surface triangle at the start.
   std::vector<int> patch(n, -1);
   if (surface && surface_patch)
@@ -235,10 +241,16 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       const Vec3 x = V.row(v).transpose();
       double before, after;
       eval_here(v, before);
+      // A sliver's vertex (a hex above max_edge_ratio) also takes a move that lowers the largest
+      // ratio of its hexes by 10%+ while its worst hex stays at kGuardAbove (or where it was).
+      const double ratio_before = max_edge_ratio > 0 ? max_ratio(v, x) : 0;
+      const bool sliver = max_edge_ratio > 0 && ratio_before > max_edge_ratio;
+      const double floor = sliver ? std::min(before, kGuardAbove) : before;
       for (double t : {1.0, 0.5, 0.25}) {
         const Vec3 p = place(v, x + t * (c - x));
-        eval(v, p, after, false, before);  // below `before`: refused, whatever the rest
-        if ((after > before + 1e-9 || (after >= before && after > 0.3)) && (before < kGuardAbove || !thins(v, p))) {
+        eval(v, p, after, false, floor);  // below `floor`: refused, whatever the rest
+        if (((after > before + 1e-9 || (after >= before && after > 0.3)) && (before < kGuardAbove || !thins(v, p))) ||
+            (sliver && after >= floor && max_ratio(v, p) < 0.9 * ratio_before)) {
           move(v, p);
           ++moves;
           ++st.laplacian_moves;
