@@ -108,7 +108,7 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only, 
       const double quad_seconds = quad_clock.seconds();
       const quad::StartQuads& kept = *std::find_if(starts.begin(), starts.end(), [](const auto& c) { return c.kept; });
       const quad::QuadResult& q = kept.quads;
-      const hex::Hausdorff hd = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), s.V, s.F);
+      const hex::Hausdorff& hd = kept.distance;
       Eigen::AlignedBox3d box;
       for (int v = 0; v < s.V.rows(); ++v) box.extend(s.V.row(v).transpose());
       std::printf("| %s | %ld | %.1f | %.1f | %d | %.4f | %d | %.3f / %.3f / %.3f | %d | %.3g / %d | %.2f | %.3f | %d / %d | %.2f | %s | %s | %s | %s |\n",

@@ -429,7 +429,7 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
   ASSERT_EQ(a.size(), 2u);
   EXPECT_FALSE(a[0].alternative);
   EXPECT_TRUE(a[1].alternative);
-  EXPECT_LT(a[0].hausdorff, 0.98 * a[1].hausdorff);
+  EXPECT_LT(a[0].distance.max, 0.98 * a[1].distance.max);
   EXPECT_TRUE(a[0].kept);
   EXPECT_FALSE(a[1].kept);
   // The other way round: the warped polycube is the extraction's, the even one its alternative.
@@ -447,8 +447,8 @@ TEST(SurfaceQuads, TheStartWhoseQuadsAreBetterIsKept) {
   EXPECT_TRUE(c[0].kept);
   EXPECT_EQ(c[0].quads.V, b[0].quads.V);
   std::printf("even map: %d quads, min %.3f mean %.3f, Hausdorff %.4f; warped: %d, %.3f, %.3f, %.4f\n",
-              a[0].quads.quality.count, a[0].quads.quality.sj_min, a[0].quads.quality.sj_mean, a[0].hausdorff,
-              a[1].quads.quality.count, a[1].quads.quality.sj_min, a[1].quads.quality.sj_mean, a[1].hausdorff);
+              a[0].quads.quality.count, a[0].quads.quality.sj_min, a[0].quads.quality.sj_mean, a[0].distance.max,
+              a[1].quads.quality.count, a[1].quads.quality.sj_min, a[1].quads.quality.sj_mean, a[1].distance.max);
 }
 
 // The l_bracket with its upright leg squashed to a step 0.00075 high above the foot (0.006 cell at
@@ -486,12 +486,12 @@ TEST(SurfaceQuads, SliverRowsOverAThinStepAreExtractedAgainWithTheStepMerged) {
   EXPECT_EQ(r.quads.quality.inverted, 0);
   EXPECT_LT(r.quads.quality.edge_ratio_max, plain[0].quads.quality.edge_ratio_max);
   // The step's height is the distance it costs (the plain quads lie on the shape).
-  EXPECT_NEAR(r.hausdorff, 0.00075, 1e-5);
-  EXPECT_LT(plain[0].hausdorff, 1e-9);
+  EXPECT_NEAR(r.distance.max, 0.00075, 1e-5);
+  EXPECT_LT(plain[0].distance.max, 1e-9);
   // The rule: fewer slivers, the distance within the slack the merge may cost.
-  EXPECT_TRUE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].hausdorff, r.quads.quality, r.hausdorff, 0.001));
-  EXPECT_FALSE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].hausdorff, r.quads.quality, r.hausdorff, 0.0005));
-  EXPECT_FALSE(quad::fewer_sliver_quads(r.quads.quality, r.hausdorff, plain[0].quads.quality, plain[0].hausdorff, 1.0));
+  EXPECT_TRUE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].distance.max, r.quads.quality, r.distance.max, 0.001));
+  EXPECT_FALSE(quad::fewer_sliver_quads(plain[0].quads.quality, plain[0].distance.max, r.quads.quality, r.distance.max, 0.0005));
+  EXPECT_FALSE(quad::fewer_sliver_quads(r.quads.quality, r.distance.max, plain[0].quads.quality, plain[0].distance.max, 1.0));
 }
 
 // ---- CLI ------------------------------------------------------------------------------------

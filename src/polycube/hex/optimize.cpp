@@ -137,8 +137,26 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
     }
     return sum;
   };
+  // Edge ratio of hex h with its corner j at p.
+  auto edge_ratio_at = [&](int h, int j, const Vec3& p) {
+    double len[12];
+    for (int i = 0; i < 12; ++i) {
+      const auto& e = kHexEdges[i];
+      const Vec3 a = e[0] == j ? p : Vec3(V.row(H(h, e[0])).transpose());
+      const Vec3 b = e[1] == j ? p : Vec3(V.row(H(h, e[1])).transpose());
+      len[i] = (a - b).norm();
+    }
+    return edge_ratio(len, 12);
+  };
+  // Per hex, its edge ratio at the current positions (for the edge-ratio guard; kept up to date by
+  // `move`).
+  std::vector<double> hex_ratio(max_edge_ratio > 0 ? H.rows() : 0);
+  for (int h = 0; h < static_cast<int>(hex_ratio.size()); ++h)
+    hex_ratio[h] = edge_ratio_at(h, 0, V.row(H(h, 0)).transpose());
   auto move = [&](int v, const Vec3& p) {
     V.row(v) = p.transpose();
+    if (!hex_ratio.empty())
+      for (const auto& [h, j] : vhj[v]) hex_ratio[h] = edge_ratio_at(h, j, p);
     if (trial_v != v || trial_p != p) {
       for (const auto& [h, j] : vhj[v]) refresh(h);
       return;
@@ -153,30 +171,23 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
   };
   // Edge-ratio guard (the scaled Jacobian is 1 on a box however thin): a move may not take a hex
   // of v above max_edge_ratio (longest over shortest edge) unless it lowers that hex's ratio.
-  auto edge_ratio = [&](int h, int j, const Vec3& p) {
-    double lo = 1e300, hi = 0;
-    for (const auto& e : kHexEdges) {
-      const Vec3 a = e[0] == j ? p : Vec3(V.row(H(h, e[0])).transpose());
-      const Vec3 b = e[1] == j ? p : Vec3(V.row(H(h, e[1])).transpose());
-      const double l = (a - b).norm();
-      lo = std::min(lo, l);
-      hi = std::max(hi, l);
-    }
-    return lo > 0 ? hi / lo : 1e300;
-  };
   auto thins = [&](int v, const Vec3& p) {
     if (!(max_edge_ratio > 0)) return false;
-    const Vec3 x = V.row(v).transpose();
     for (const auto& [h, j] : vhj[v]) {
-      const double after = edge_ratio(h, j, p);
-      if (after > max_edge_ratio && after > edge_ratio(h, j, x)) return true;
+      const double after = edge_ratio_at(h, j, p);
+      if (after > max_edge_ratio && after > hex_ratio[h]) return true;
     }
     return false;
   };
-  // The largest edge ratio of v's hexes with v at p.
+  // The largest edge ratio of v's hexes with v at p, and at its current position.
   auto max_ratio = [&](int v, const Vec3& p) {
     double m = 0;
-    for (const auto& [h, j] : vhj[v]) m = std::max(m, edge_ratio(h, j, p));
+    for (const auto& [h, j] : vhj[v]) m = std::max(m, edge_ratio_at(h, j, p));
+    return m;
+  };
+  auto max_ratio_here = [&](int v) {
+    double m = 0;
+    for (const auto& [h, j] : vhj[v]) m = std::max(m, hex_ratio[h]);
     return m;
   };
   // Patch of every boundary vertex: that of its closest surface triangle at the start.
@@ -243,7 +254,7 @@ OptimizeStats optimize_hexes(MatX3d& V, const MatX8i& H, const std::vector<char>
       eval_here(v, before);
       // A sliver's vertex (a hex above max_edge_ratio) also takes a move that lowers the largest
       // ratio of its hexes by 10%+ while its worst hex stays at kGuardAbove (or where it was).
-      const double ratio_before = max_edge_ratio > 0 ? max_ratio(v, x) : 0;
+      const double ratio_before = max_edge_ratio > 0 ? max_ratio_here(v) : 0;
       const bool sliver = max_edge_ratio > 0 && ratio_before > max_edge_ratio;
       const double floor = sliver ? std::min(before, kGuardAbove) : before;
       for (double t : {1.0, 0.5, 0.25}) {

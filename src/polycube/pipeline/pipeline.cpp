@@ -610,7 +610,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                 {"sj_min", c.quads.quality.sj_min},
                                 {"sj_mean", c.quads.quality.sj_mean},
                                 {"inverted", c.quads.quality.inverted},
-                                {"hausdorff_rel", c.hausdorff / box.diagonal().norm()},
+                                {"hausdorff_rel", c.distance.max / box.diagonal().norm()},
                                 {"kept", c.kept}});
           report["polycube"]["starts_compared"] = compared;
         }
@@ -804,9 +804,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         return a;
       };
       // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
-      // seconds: the quad stage's so far.
+      // seconds_before: the quad stage's so far; known: the quads' distance to the surface if
+      // measured already (else measured here).
       auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, double seconds_before,
-                             const json& grid, const json& extra) {
+                             const hex::Hausdorff* known, const json& grid, const json& extra) {
         if (qr.quality.inverted > 0)
           throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
                                                " quads are folded or degenerate (min scaled Jacobian " +
@@ -817,7 +818,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         io::write_medit(stage_path("quad.mesh"), qm);
         io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
         io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
-        const hex::Hausdorff hd = hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
+        const hex::Hausdorff hd =
+            known ? *known : hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
         Eigen::AlignedBox3d box;
         for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
         json hist = json::array();
@@ -972,7 +974,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                              {"hausdorff_rel", t.hausdorff / diag},
                              {"replaced", t.replaced}});
         }
-        write_quads(qr, ex.charts.corners, sq, surface_quad_seconds,
+        write_quads(qr, ex.charts.corners, sq, surface_quad_seconds, &kept->distance,
                     {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
                      {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
                      {"thin_steps", thin_steps}, {"grading", opt.quad.grading.strength},
@@ -1002,7 +1004,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
           report_grid_optimized = true;
         }
-        write_quads(qr, ex.charts.corners, sq, 0,
+        write_quads(qr, ex.charts.corners, sq, 0, nullptr,
                     {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
                      {"optimized", report_grid_optimized}},
                     json::object());

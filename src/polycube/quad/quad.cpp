@@ -153,11 +153,13 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return m;
   };
-  // Where the worst quad around a vertex is kSliverFloor or more, a move may not take its quads
-  // above QuadOptions::max_edge_ratio unless it lowers their largest ratio (the scaled Jacobian
-  // accepts moves that squeeze quads into slivers; spot: an edge of 6e-5 in a quad 0.2 long).
-  auto ratio_guard = [&](double worst_before, double ratio_before, double ratio_after) {
-    return opt.max_edge_ratio <= 0 || worst_before < kSliverFloor || ratio_after <= opt.max_edge_ratio ||
+  // Where the worst quad around a vertex (`worst_q`: the smoothing passes its value before the
+  // move, the pattern search, which visits vertices under search_below only, its value at the trial
+  // position) is kSliverFloor or more, a move may not take its quads above
+  // QuadOptions::max_edge_ratio unless it lowers their largest ratio (the scaled Jacobian accepts
+  // moves that squeeze quads into slivers; spot: an edge of 6e-5 in a quad 0.2 long).
+  auto ratio_guard = [&](double worst_q, double ratio_before, double ratio_after) {
+    return opt.max_edge_ratio <= 0 || worst_q < kSliverFloor || ratio_after <= opt.max_edge_ratio ||
            ratio_after < ratio_before;
   };
   // Feature vertices slide along their sharp edge (to the best of a few positions between their two

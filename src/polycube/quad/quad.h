@@ -167,7 +167,7 @@ struct StartQuads {
   double polycube_arap = 0;   ///< its polycube's ARAP distortion
   bool alternative = false;   ///< from PolycubeExtraction::alternative
   QuadResult quads;
-  double hausdorff = 0;       ///< two-sided, absolute (hex::hausdorff to `target`)
+  hex::Hausdorff distance;    ///< to `target` (hex::hausdorff; distance.max: two-sided, absolute)
   std::vector<QuadThinStepRetry> retries;
   bool kept = false;
 };

@@ -302,14 +302,14 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
     s.start = p->realized.start;
     s.polycube_arap = p->realized.arap;
     s.alternative = p != &e;
-    auto extract = [&](const QuadOptions& o, double& h) {
+    auto extract = [&](const QuadOptions& o, hex::Hausdorff& h) {
       QuadResult q = quad_mesh_from_surface_polycube(rest, p->map_triangles(B), p->realized.X,
                                                      p->map_triangle_labels(), std::sqrt(target_quads / area), target,
                                                      o, hooks);
-      h = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), target.V, target.F).max;
+      h = hex::hausdorff(q.V, hex::triangulate_quads(q.Q), target.V, target.F);
       return q;
     };
-    s.quads = extract(opt, s.hausdorff);
+    s.quads = extract(opt, s.distance);
     // Slivers: rows of quads over a riser far thinner than a cell (or where the map crushes the
     // surface); merging thicker steps removes the former.
     for (const double thin : {0.05, 0.25}) {
@@ -320,8 +320,9 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
       QuadThinStepRetry t;
       t.thin_steps = thin;
       QuadResult q;
+      hex::Hausdorff d;
       try {
-        q = extract(o, t.hausdorff);
+        q = extract(o, d);
       } catch (const Error& err) {
         if (err.kind() != ErrorKind::Polycube) throw;
         hooks.info("quads with steps under " + std::to_string(thin) + " cells merged: " + err.what() + "; not kept");
@@ -329,19 +330,20 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
         s.retries.push_back(t);
         break;  // thicker steps merged miss corners too
       }
+      t.hausdorff = d.max;
       t.merged_planes = q.merged_planes;
       t.over_10 = q.quality.edge_ratio_above_10;
       t.ratio_max = q.quality.edge_ratio_max;
       t.sj_min = q.quality.sj_min;
       t.replaced = q.merged_planes > s.quads.merged_planes &&
-                   fewer_sliver_quads(s.quads.quality, s.hausdorff, q.quality, t.hausdorff, thin * mean_edge(q));
+                   fewer_sliver_quads(s.quads.quality, s.distance.max, q.quality, d.max, thin * mean_edge(q));
       hooks.info("quads with steps under " + std::to_string(thin) + " cells merged (" +
                  std::to_string(q.merged_planes) + " planes): edge ratio max " + std::to_string(t.ratio_max) + ", " +
                  std::to_string(t.over_10) + " over 10, scaled Jacobian min " + std::to_string(t.sj_min) +
                  ", Hausdorff " + relative(t.hausdorff) + (t.replaced ? ": kept" : ": not kept"));
       if (t.replaced) {
         s.quads = std::move(q);
-        s.hausdorff = t.hausdorff;
+        s.distance = d;
       }
       s.retries.push_back(t);
     }
@@ -349,12 +351,13 @@ std::vector<StartQuads> surface_quads_best_start(const chart::PolycubeExtraction
       hooks.info("quads from the " + s.start + " start's polycube (ARAP " + std::to_string(s.polycube_arap) +
                  "): " + std::to_string(s.quads.quality.count) + ", scaled Jacobian min " +
                  std::to_string(s.quads.quality.sj_min) + " mean " + std::to_string(s.quads.quality.sj_mean) +
-                 ", Hausdorff " + relative(s.hausdorff) + " of the bbox diagonal");
+                 ", Hausdorff " + relative(s.distance.max) + " of the bbox diagonal");
     out.push_back(std::move(s));
   }
   size_t best = 0;
   for (size_t i = 1; i < out.size(); ++i)
-    if (better_quads(out[best].quads.quality, out[best].hausdorff, out[i].quads.quality, out[i].hausdorff)) best = i;
+    if (better_quads(out[best].quads.quality, out[best].distance.max, out[i].quads.quality, out[i].distance.max))
+      best = i;
   out[best].kept = true;
   return out;
 }
