@@ -177,6 +177,10 @@ int main(int argc, char** argv) {
   app.add_option("--thickness-keep", d.thickness_keep,
                  "Surface mode: the fraction of their rest thickness thin parts keep at least")
       ->capture_default_str()->check(CLI::Range(0.01, 0.99));
+  app.add_option("--thickness-max", d.thickness_max,
+                 "Surface mode: parts thinner than this fraction of the bounding-box diagonal are held by the "
+                 "thickness barrier")
+      ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--volume-boost", d.volume_boost_factor,
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "
                  "would invert the tet (1 = off)")
@@ -221,6 +225,10 @@ int main(int argc, char** argv) {
                  "skipped (surface mode: triangles folded, the global untangling rounds skipped); -1 = off (the elliptic "
                  "untangling first)")
       ->capture_default_str()->check(CLI::Range(-1, 1000000));
+  app.add_option("--surface-untangle-rounds", rz.surface_untangle_rounds,
+                 "Surface mode: global untangling rounds (L-BFGS over the whole surface) after a local untangling "
+                 "that left more than --local-first triangles folded (0 = none: the next start takes over)")
+      ->capture_default_str()->check(CLI::Range(0, 1000));
   app.add_option("--continuation-retries", rz.continuation_retries,
                  "Polycube realization: when the continuation start stalls, retries with a 10x stronger barrier "
                  "(each) before landing on the planes and untangling")

@@ -290,12 +290,14 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   r = run_cli("--example box_hole --surface --until polycube -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   const double plain = report(out)["polycube"]["isometric_distortion"]["max"].get<double>();
-  r = run_cli("--example box_hole --surface --until polycube --relax 300 -q -o " + out);
+  r = run_cli("--example box_hole --surface --until polycube --relax 300 --surface-untangle-rounds 4 -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   j = report(out);
   EXPECT_EQ(j["polycube"]["realize_options"]["relax_iterations"].get<int>(), 300);
+  EXPECT_EQ(j["polycube"]["realize_options"]["surface_untangle_rounds"].get<int>(), 4);
   EXPECT_LE(j["polycube"]["isometric_distortion"]["max"].get<double>(), plain);
   EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --relax -1 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --surface-untangle-rounds -1 -q -o " + out).code, 2);
   r = run_cli("--example box_hole --until polycube --relax 10 -q -o " + out);
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.output.find("--relax"), std::string::npos) << r.output;

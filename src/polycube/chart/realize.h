@@ -84,6 +84,15 @@ struct RealizeOptions {
   /// rounds (L-BFGS over the whole surface) are skipped, the edge flips and collapses take over
   /// (fandisk 25.2 -> 0.6 s, polycube ARAP 0.0461 -> 0.0373; rocker 124 -> 1.7 s, 0.0619 -> 0.0502).
   int local_first = 20;
+  /// Surface mode: when the local untangling leaves more than local_first triangles folded, at
+  /// most this many global rounds (L-BFGS over the whole surface, eps decreasing) follow; 0 = none,
+  /// the start then fails and the next one (or the edge collapses) takes over. On the 14 shared
+  /// surfaces measured (2026-11-28) the global rounds never realized a start the local untangling
+  /// had not: where they ran (cow 594 -> 310 folded, blub 2579 -> 441, from the harmonic start 33
+  /// -> none fewer) a later start or the collapses realized the layout, with the same polycube
+  /// without them, and they cost 1.2 s per round on blub (28 of its 92 s). local_first = -1 still
+  /// runs them (at most 30 rounds).
+  int surface_untangle_rounds = 0;
   /// Surface mode: after the final ARAP iterations, this many L-BFGS iterations (0 = off) on the
   /// elliptic energy of the map (Garanzha et al., 2D, shape and area terms weighted equally: a
   /// barrier against crushing and folding), over the coordinates no plane holds. ARAP lets a few

@@ -374,8 +374,9 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     MatX3d X_best = X;
     int sweep = 0;
     // At most 100 sweeps, 10 without fewer folds; and after 10 sweeps, over half the folds left
-    // (and more than the global rounds are skipped for) means the layout needs the global rounds:
-    // they go on from the best state (organic/cow: 1058 -> 818 after 100 sweeps, 4 s per call,
+    // (and more than the global rounds are skipped for) means the layout needs more than local
+    // steps: the global rounds (RealizeOptions::surface_untangle_rounds, none by default) go on
+    // from the best state, or the start fails and the next one takes over (organic/cow: 1058 -> 818 after 100 sweeps, 4 s per call,
     // where bumpy torus went 385 -> 1 in 13 sweeps).
     for (; sweep < 100 && best > 0 && since_best < 10 && !(sweep == 10 && best > opt.local_first && 2 * best > initial);
          ++sweep) {
@@ -476,8 +477,9 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
       const int m = untangle_locally(X, el, before, sweeps);
       hooks.debug("surface local untangling: " + std::to_string(before) + " -> " + std::to_string(m) +
                   " misoriented triangles in " + std::to_string(sweeps) + " sweeps");
-      if (m <= opt.local_first) return;
+      if (m <= opt.local_first || opt.surface_untangle_rounds <= 0) return;
     }
+    const int max_rounds = opt.local_first < 0 ? 30 : opt.surface_untangle_rounds;
     // Unknowns from X (each variable's value is shared by its vertices).
     Eigen::VectorXd z = to_z(X);
     double eps = 1.0;
@@ -490,9 +492,9 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     }
     int best = misoriented(X), since_best = 0, total = 0;
     Eigen::VectorXd z_best = z;  // the round with the fewest misoriented triangles
-    // At most 30 rounds, and 5 without fewer folds (on fandisk, eight and rocker the fewest came by
-    // round 6, the count then oscillating).
-    for (int round = 0; round < 30 && best > 0 && since_best < 5; ++round) {
+    // At most max_rounds rounds, and 5 without fewer folds (on fandisk, eight and rocker the fewest
+    // came by round 6, the count then oscillating, when these rounds were the only untangling).
+    for (int round = 0; round < max_rounds && best > 0 && since_best < 5; ++round) {
       const double E0 = energy(el, z, eps, nullptr);
       double E = E0;
       LbfgsOptions lo;

@@ -647,6 +647,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                {"eq17_budget", opt.polycube.realize.eq17_budget},
                                {"untangle_patience", opt.polycube.realize.untangle_patience},
                                {"local_first", opt.polycube.realize.local_first},
+                               {"surface_untangle_rounds", opt.polycube.realize.surface_untangle_rounds},
                                {"relax_iterations", opt.polycube.realize.relax_iterations},
                                {"continuation_retries", opt.polycube.realize.continuation_retries},
                                {"stall_repeats", opt.polycube.realize.stall_repeats},
