@@ -256,6 +256,12 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   bool no_cleanup = false;
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
+  app.add_option("--pinch-above", opt.polycube.cleanup.pinch_above,
+                 "Polycube labels: a chart of degree 2 or 3 pinched between opposite neighbours gets its missing "
+                 "side opened (instead of being relabelled whole) when its area is above this fraction of the total")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
+  app.add_option("--max-pinches", opt.polycube.cleanup.max_pinches, "Polycube labels: pinches opened at most per cleanup")
+      ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--collapsed-ratio", opt.polycube.collapsed_ratio,
                  "Polycube labels: boundary triangles whose deformed area is below this fraction of the median "
                  "deformed/rest area ratio take their neighbours' label (their normal is unreliable); 0 = off")
