@@ -256,10 +256,12 @@ int main(int argc, char** argv) {
       ->check(CLI::ExistingFile);
   bool no_cleanup = false;
   app.add_flag("--no-cleanup", no_cleanup, "Polycube labels: skip the topological cleanup (for inspection)");
-  app.add_option("--pinch-above", opt.polycube.cleanup.pinch_above,
+  double pinch_above = -1;
+  app.add_option("--pinch-above", pinch_above,
                  "Polycube labels: a chart of degree 2 or 3 pinched between opposite neighbours gets its missing "
-                 "side opened (instead of being relabelled whole) when its area is above this fraction of the total")
-      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
+                 "side opened (instead of being relabelled whole) when its area is above this fraction of the total "
+                 "(default 0.01, 0.002 in surface mode)")
+      ->check(CLI::Range(0.0, 1.0));
   app.add_option("--max-pinches", opt.polycube.cleanup.max_pinches, "Polycube labels: pinches opened at most per cleanup")
       ->capture_default_str()->check(CLI::Range(0, 100000));
   app.add_option("--collapsed-ratio", opt.polycube.collapsed_ratio,
@@ -396,6 +398,7 @@ int main(int argc, char** argv) {
     until = "hex";
   }
   if (no_cleanup) opt.polycube.cleanup = {false, false, false, false};
+  if (pinch_above >= 0) opt.polycube.cleanup.pinch_above = opt.polycube.cleanup.pinch_above_surface = pinch_above;
   auto logger = spdlog::stderr_color_mt("polycube");
   if (verbose) {
     // With -v, each line gives the seconds since the start: where a long run spends its time.

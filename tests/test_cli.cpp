@@ -8,6 +8,7 @@
 #include <set>
 #include <sstream>
 
+#include "polycube/chart/labeling.h"
 #include "polycube/examples/examples.h"
 #include "polycube/hex/quality.h"
 #include "polycube/io/readers.h"
@@ -299,6 +300,7 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   j = report(out);
   EXPECT_EQ(j["polycube"]["realize_options"]["relax_iterations"].get<int>(), 300);
   EXPECT_EQ(j["polycube"]["realize_options"]["surface_untangle_rounds"].get<int>(), 4);
+  EXPECT_EQ(j["polycube"]["cleanup"]["pinch_above"].get<double>(), chart::CleanupOptions{}.pinch_above_surface);
   EXPECT_LE(j["polycube"]["isometric_distortion"]["max"].get<double>(), plain);
   EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --relax -1 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --surface --until polycube --surface-untangle-rounds -1 -q -o " + out).code, 2);

@@ -758,7 +758,18 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
 
 PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
                                     const ExtractOptions& opt, const Hooks& hooks) {
-  return extract(rest, T, B, deformed, opt, hooks, nullptr);
+  if (T.rows() > 0) return extract(rest, T, B, deformed, opt, hooks, nullptr);
+  ExtractOptions surface = opt;
+  surface.cleanup.pinch_above = opt.cleanup.pinch_above_surface;
+  PolycubeExtraction e = extract(rest, T, B, deformed, surface, hooks, nullptr);
+  if (e.realized.success || !(opt.cleanup.pinch_above_surface < opt.cleanup.pinch_above)) return e;
+  // The pinches opened below the volume threshold can leave a layout no start realizes
+  // (humanoid, 2026-11-28): the volume threshold's layout is tried before giving up.
+  hooks.debug("no polycube realized with the pinches of charts above " + std::to_string(opt.cleanup.pinch_above_surface) +
+              " of the area opened (" + e.realized.failure + "); extracting again with only those above " +
+              std::to_string(opt.cleanup.pinch_above));
+  PolycubeExtraction again = extract(rest, T, B, deformed, opt, hooks, nullptr);
+  return again.realized.success ? again : e;
 }
 
 int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels) {

@@ -407,6 +407,7 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
                 std::to_string(c.degree(chart)) + ") relabelled " + label_name(c.label[to]) + ": " + why);
   };
   CleanupStats s;
+  s.pinch_above = opt.pinch_above;
   const std::vector<int> initial = labels;
   const MatX3i N = face_adjacency(F);
   for (s.rounds = 0; s.rounds < opt.max_rounds; ++s.rounds) {

@@ -643,7 +643,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
                        {"relabelled_faces", ex.cleanup.relabelled_faces},
                        {"collapsed_ratio", opt.polycube.collapsed_ratio},
-                       {"pinch_above", opt.polycube.cleanup.pinch_above},
+                       {"pinch_above", ex.cleanup.pinch_above},
                        {"max_pinches", opt.polycube.cleanup.max_pinches}};
       pj["realize_options"] = {{"start", opt.polycube.realize.start},
                                {"eq17_budget", opt.polycube.realize.eq17_budget},
