@@ -133,7 +133,9 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
         const int best = static_cast<int>(std::max_element(votes, votes + 6) - votes);
         if (votes[best] > 0) next[t] = best, ++changed_here;
       }
-      cleanup_labels(deformed, FF, next, opt.cleanup, hooks);
+      // Its pinches count for extract_polycube's choice of threshold, adopted or not.
+      e.cleanup.smallest_pinch =
+          std::min(e.cleanup.smallest_pinch, cleanup_labels(deformed, FF, next, opt.cleanup, hooks).smallest_pinch);
       if (next == LL || check_charts(FF, static_cast<int>(deformed.rows()), next).charts < e.charts.charts / 2)
         return false;
       ++relabels;
@@ -713,6 +715,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     e.cleanup.opposite += again.opposite;
     e.cleanup.rims += again.rims;
     e.cleanup.pinches += again.pinches;
+    e.cleanup.smallest_pinch = std::min(e.cleanup.smallest_pinch, again.smallest_pinch);
     e.cleanup.misoriented += changed;
     e.cleanup.relabelled_faces = 0;
     for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];
@@ -762,9 +765,10 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   ExtractOptions surface = opt;
   surface.cleanup.pinch_above = opt.cleanup.pinch_above_surface;
   PolycubeExtraction e = extract(rest, T, B, deformed, surface, hooks, nullptr);
-  if (e.realized.success || !(opt.cleanup.pinch_above_surface < opt.cleanup.pinch_above)) return e;
   // The pinches opened below the volume threshold can leave a layout no start realizes
-  // (humanoid, 2026-11-28): the volume threshold's layout is tried before giving up.
+  // (humanoid, 2026-11-28): the volume threshold's layout is tried before giving up, unless no
+  // such pinch was opened (the same labels, the same failure).
+  if (e.realized.success || !(e.cleanup.smallest_pinch <= opt.cleanup.pinch_above)) return e;
   hooks.debug("no polycube realized with the pinches of charts above " + std::to_string(opt.cleanup.pinch_above_surface) +
               " of the area opened (" + e.realized.failure + "); extracting again with only those above " +
               std::to_string(opt.cleanup.pinch_above));

@@ -483,9 +483,11 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
         }
       }
       bool pinched = false;
+      const double total = std::accumulate(c.area.begin(), c.area.end(), 0.0);
       if (best >= 0 && best_deg >= 2 && s.pinches < opt.max_pinches && opt.separate_opposite &&
-          c.area[best] > opt.pinch_above * std::accumulate(c.area.begin(), c.area.end(), 0.0))
+          c.area[best] > opt.pinch_above * total)
         if (const int r = open_pinch(X, F, c, vcharts, best, labels); r > 0) {
+          s.smallest_pinch = std::min(s.smallest_pinch, c.area[best] / total);
           hooks.debug("cleanup: side of " + std::to_string(r) + " triangles opened at a pinch of chart " +
                       std::to_string(best) + " (" + label_name(c.label[best]) + ", " + std::to_string(c.faces[best]) +
                       " triangles, degree " + std::to_string(best_deg) + ")");

@@ -22,6 +22,7 @@
 // are annuli; every chart boundary loop with at least 4 corners (a face of a polycube is a
 // rectilinear polygon); no two corners on the same three planes (they would coincide).
 #pragma once
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -98,6 +99,9 @@ struct CleanupStats {
   int rims = 0;        ///< rims opened between large opposite charts that met (see rim_above)
   int pinches = 0;     ///< sides opened at pinches of low-degree charts (see pinch_above)
   double pinch_above = 0;  ///< the CleanupOptions::pinch_above this cleanup ran with
+  /// area of the smallest chart a pinch was opened on, as a fraction of the total (+inf: none);
+  /// a cleanup with a higher pinch_above than this gives the same labels
+  double smallest_pinch = std::numeric_limits<double>::infinity();
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
   int misoriented = 0; ///< triangles relabelled after a realization left them facing away (extract_polycube)
