@@ -376,8 +376,8 @@ RealizeResult realize_surface_polycube(const MatX3d& rest, const MatX3i& F, cons
     // At most 100 sweeps, 10 without fewer folds; and after 10 sweeps, over half the folds left
     // (and more than the global rounds are skipped for) means the layout needs more than local
     // steps: the global rounds (RealizeOptions::surface_untangle_rounds, none by default) go on
-    // from the best state, or the start fails and the next one takes over (organic/cow: 1058 -> 818 after 100 sweeps, 4 s per call,
-    // where bumpy torus went 385 -> 1 in 13 sweeps).
+    // from the best state, or the start fails and the next one takes over (organic/cow: 1058 ->
+    // 818 after 100 sweeps, 4 s per call, where bumpy torus went 385 -> 1 in 13 sweeps).
     for (; sweep < 100 && best > 0 && since_best < 10 && !(sweep == 10 && best > opt.local_first && 2 * best > initial);
          ++sweep) {
       std::vector<char> folded(F.rows(), 0);
