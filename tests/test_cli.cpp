@@ -657,6 +657,69 @@ TEST(Cli, HexOptimizationDoesNotSqueezeHexesIntoSlivers) {
   EXPECT_LT(h[0]["edge_ratio"]["max"].get<double>(), 15.0) << h[0]["edge_ratio"].dump();
 }
 
+TEST(Cli, HexesThroughAFoldedPolycubeMap) {
+  // A polycube map with a few tets turned over (here: one interior vertex of the L-bracket's
+  // polycube pushed past its farthest neighbour) is no polycube map: --until polycube refuses it,
+  // but --hex extracts the hexes through it (PipelineOptions::hex_through_folds), keeps them only
+  // if none is inverted, and writes no polycube.* or map.obj.
+  std::string dir = temp_dir("folded_map");
+  ASSERT_EQ(run_cli("--example l_bracket --until polycube -q -o " + dir + "/a").code, 0);
+  MeshData pm = io::read_medit(dir + "/a/polycube.mesh");
+  std::vector<char> on_boundary(pm.V.rows(), 0);
+  for (int f = 0; f < pm.F.rows(); ++f)
+    for (int j = 0; j < 3; ++j) on_boundary[pm.F(f, j)] = 1;
+  std::vector<std::vector<int>> star(pm.V.rows());
+  for (int t = 0; t < pm.T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) star[pm.T(t, j)].push_back(t);
+  const Vec3 centre = 0.5 * (pm.V.colwise().minCoeff() + pm.V.colwise().maxCoeff()).transpose();
+  int v = -1;  // the interior vertex nearest the centre whose neighbours are interior too
+  for (int u = 0; u < pm.V.rows(); ++u) {
+    bool deep = !on_boundary[u] && !star[u].empty();
+    for (int t : star[u])
+      for (int j = 0; j < 4; ++j) deep = deep && !on_boundary[pm.T(t, j)];
+    if (deep && (v < 0 || (pm.V.row(u).transpose() - centre).norm() < (pm.V.row(v).transpose() - centre).norm())) v = u;
+  }
+  ASSERT_GE(v, 0);
+  int far = -1;
+  for (int t : star[v])
+    for (int j = 0; j < 4; ++j)
+      if (far < 0 || (pm.V.row(pm.T(t, j)) - pm.V.row(v)).norm() > (pm.V.row(far) - pm.V.row(v)).norm()) far = pm.T(t, j);
+  pm.V.row(v) += 1.3 * (pm.V.row(far) - pm.V.row(v));
+  int inverted = 0;
+  for (int t = 0; t < pm.T.rows(); ++t) {
+    const Vec3 a = pm.V.row(pm.T(t, 0)), b = pm.V.row(pm.T(t, 1)), c = pm.V.row(pm.T(t, 2)), d = pm.V.row(pm.T(t, 3));
+    inverted += !((b - a).dot((c - a).cross(d - a)) > 0);
+  }
+  ASSERT_GT(inverted, 0);
+  ASSERT_LE(inverted, 30);
+  io::write_medit(dir + "/folded.mesh", pm);
+  const std::string in = dir + "/a/tetmesh.mesh --polycube-map " + dir + "/folded.mesh";
+  RunResult r = run_cli(in + " --hex -o " + dir + "/h");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("the polycube map given is folded (" + std::to_string(inverted) + " tets are inverted"),
+            std::string::npos) << r.output;
+  json h = report(dir + "/h");
+  EXPECT_FALSE(h["polycube"]["map_valid"].get<bool>());
+  EXPECT_FALSE(h["polycube"]["realization"]["success"].get<bool>());
+  EXPECT_EQ(h["polycube"]["inverted_tets"], inverted);
+  EXPECT_TRUE(h["hex"]["through_folded_map"].get<bool>());
+  EXPECT_EQ(h["hex"]["inverted"], 0);
+  EXPECT_GT(h["hex"]["sj_min"].get<double>(), 0.5);
+  EXPECT_TRUE(fs::exists(dir + "/h/hex.mesh"));
+  EXPECT_TRUE(fs::exists(dir + "/h/labels.txt"));
+  for (const char* f : {"polycube.mesh", "polycube.vtk", "polycube_surface.obj", "map.obj"})
+    EXPECT_FALSE(fs::exists(dir + "/h/" + f)) << f;
+  // Refused as a polycube, and with --hex-through-folds 0 or under the inverted count: exit 4.
+  for (const std::string& extra : std::vector<std::string>{" --until polycube", " --hex --hex-through-folds 0",
+                                                           " --hex --hex-through-folds " + std::to_string(inverted - 1)}) {
+    r = run_cli(in + extra + " -o " + dir + "/x");
+    EXPECT_EQ(r.code, 4) << extra << r.output;
+    EXPECT_NE(r.output.find("tets are inverted or flat in the polycube"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir + "/x/hex.mesh"));
+    EXPECT_FALSE(fs::exists(dir + "/x/polycube.mesh"));
+  }
+}
+
 TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   std::string dir = temp_dir("given_map");
   ASSERT_EQ(run_cli("--example box_hole -q -o " + dir + "/a").code, 0);
@@ -666,6 +729,8 @@ TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   json a = report(dir + "/a"), b = report(dir + "/b");
   EXPECT_EQ(b["polycube"]["source"], dir + "/a/polycube.mesh");
   EXPECT_EQ(b["polycube"]["realization"]["start"], "given");
+  EXPECT_TRUE(b["polycube"]["map_valid"].get<bool>());
+  EXPECT_FALSE(b["hex"]["through_folded_map"].get<bool>());
   EXPECT_EQ(b["polycube"]["charts"], a["polycube"]["charts"]);
   EXPECT_EQ(b["polycube"]["corners"], a["polycube"]["corners"]);
   EXPECT_NEAR(b["polycube"]["arap_distortion"].get<double>(), a["polycube"]["arap_distortion"].get<double>(), 1e-9);

@@ -1229,7 +1229,7 @@ std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& 
 }
 
 PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& X_in,
-                                     double tolerance) {
+                                     double tolerance, int max_inverted) {
   Stopwatch sw;
   if (X_in.rows() != rest.rows())
     throw Error(ErrorKind::InvalidMesh, "the polycube map has " + std::to_string(X_in.rows()) +
@@ -1289,11 +1289,9 @@ PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const 
     const Vec3 a = r.X.row(T(t, 0)), b = r.X.row(T(t, 1)), c = r.X.row(T(t, 2)), d = r.X.row(T(t, 3));
     if (!((b - a).dot((c - a).cross(d - a)) > 0) && r.inverted++ == 0) first = t;
   }
-  if (r.inverted > 0) {
-    throw Error(ErrorKind::InvalidMesh, "polycube map: " + std::to_string(r.inverted) +
-                                            " tets are inverted or flat in the polycube (first: tet " +
-                                            std::to_string(first) + ")");
-  }
+  const std::string inverted_why = std::to_string(r.inverted) + " tets are inverted or flat in the polycube (first: tet " +
+                                   std::to_string(first) + ")";
+  if (r.inverted > max_inverted) throw Error(ErrorKind::InvalidMesh, "polycube map: " + inverted_why);
   check_faces(B, ex.labels, r);
   if (r.misoriented_faces > 0)
     throw Error(ErrorKind::InvalidMesh, "polycube map: " + std::to_string(r.misoriented_faces) +
@@ -1309,7 +1307,8 @@ PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const 
   r.isometric = isometric_distortion(rest, r.X, T);
   ex.charts = check_charts(B, static_cast<int>(X_in.rows()), ex.labels);
   ex.initial_charts = ex.charts.charts;
-  r.success = true;
+  r.success = r.inverted == 0;
+  if (!r.success) r.failure = inverted_why;
   r.seconds = sw.seconds();
   return ex;
 }

@@ -162,8 +162,11 @@ std::vector<std::pair<int, int>> split_edges_for_collapse(MatX3d& rest, MatX3d& 
 /// `tolerance` x the bbox diagonal of X of every one of them (files written with few digits pass,
 /// a shape that is not a polycube does not). The result is as extract_polycube's on success
 /// (realized.start = "given", cleanup counts zero). Throws Error(InvalidMesh) naming the first
-/// triangle off its plane, of zero area, or the first tet that is not positive.
+/// triangle off its plane, of zero area, or the first tet that is not positive. max_inverted: up to
+/// this many tets that are not positive are tolerated: the result then has realized.success false,
+/// realized.inverted set and the reason in realized.failure (a folded map, through which hexes may
+/// still be extracted: PipelineOptions::hex_through_folds).
 PolycubeExtraction polycube_from_map(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& X,
-                                     double tolerance = 1e-6);
+                                     double tolerance = 1e-6, int max_inverted = 0);
 
 }  // namespace polycube::chart

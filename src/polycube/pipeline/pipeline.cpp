@@ -546,7 +546,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       return X;
     };
     auto read_given_map = [&] {
-      return chart::polycube_from_map(tm.V, tm.T, tm.boundary, read_same_tets(opt.polycube_map, "polycube map"));
+      // A few tets inverted pass when hexes are asked for (they may be extracted through the folds).
+      return chart::polycube_from_map(tm.V, tm.T, tm.boundary, read_same_tets(opt.polycube_map, "polycube map"), 1e-6,
+                                       opt.until == Stage::Hex ? opt.hex_through_folds : 0);
     };
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && given_deformed) {
       // The extraction starts from the given deformation: its figures are measured, nothing is written.
@@ -688,7 +690,24 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                            {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
                            {"seconds", rr.seconds}};
       if (!rr.success) pj["realization"]["failure"] = rr.failure;
-      if (!rr.success) throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
+      // Hexes asked for and no polycube: the realization's best state may still carry them when it
+      // is on the planes with a few tets inverted (PipelineOptions::hex_through_folds).
+      const bool folded_map = !rr.success && opt.until == Stage::Hex && !opt.surface &&
+                              opt.hex_through_folds > 0 && rr.X.rows() > 0 && rr.T.rows() > 0 && rr.inverted > 0 &&
+                              rr.inverted <= opt.hex_through_folds && rr.planarity_error <= 1e-9;
+      if (!rr.success && !folded_map)
+        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
+      pj["map_valid"] = rr.success;
+      if (folded_map) {
+        // Its figures, which the realization leaves unset on failure (distortions over the positive tets).
+        ex.realized.arap = deform::arap_energy(rr.X, rr.T, deform::ArapRest::build(rr.rest, rr.T), 1.0, nullptr, nullptr);
+        ex.realized.isometric = chart::isometric_distortion(rr.rest, rr.X, rr.T);
+        hooks.warn((given_map ? "the polycube map given is folded (" + rr.failure + ")"
+                              : "no valid polycube could be realized (" + rr.failure + "); its best state is on the "
+                                "planes with " + std::to_string(rr.inverted) + " tets inverted") +
+                   ": extracting the hexes through that folded map (polycube.* and map.obj are not written; "
+                   "--hex-through-folds 0 turns this off)");
+      }
       pj["arap_distortion"] = rr.arap;
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
@@ -700,7 +719,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                     {"mean", rr.isometric.mean},
                                     {"max", rr.isometric.max},
                                     {"nearly_flat", rr.isometric.nearly_flat}};
-      if (rr.isometric.nearly_flat > 0)
+      if (rr.isometric.nearly_flat > 0 && !folded_map)
         hooks.warn("the polycube map is nearly degenerate at " + std::to_string(rr.isometric.nearly_flat) +
                    (opt.surface ? " triangles" : " tets") + " (isometric distortion above " +
                    std::to_string(static_cast<int>(chart::kNearlyFlat)) + ", max " + std::to_string(rr.isometric.max) +
@@ -768,17 +787,19 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::CellFields pf;
       pf["label"] = PL;
       pf["label"].resize(PB.rows() + rr.T.rows(), -1);
-      io::write_medit(stage_path("polycube.mesh"), pm);
-      io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
+      if (!folded_map) {  // a folded map is no polycube map: only the hexes built through it are a result
+        io::write_medit(stage_path("polycube.mesh"), pm);
+        io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
+      }
       io::CellFields df;
       df["label"] = ex.labels;
       df["label"].resize(B.rows() + tm.T.rows(), -1);
       if (!given_map && !given_deformed) write_deformed_vtk(df);
-      {
+      if (!folded_map) {
         const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
         io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
+        io::write_obj(stage_path("map.obj"), map_V, surface.F);
       }
-      io::write_obj(stage_path("map.obj"), map_V, surface.F);
       // Labels on the input surface and the deformed mesh too.
       io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
       if (rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) {
@@ -896,7 +917,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                   "--thin-steps merges a step's planes unless they face each other), which stretches the map there";
           throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
                                                " hexes are inverted or degenerate after optimization (min scaled "
-                                               "Jacobian " + std::to_string(hr.quality.sj_min) + ")" + why);
+                                               "Jacobian " + std::to_string(hr.quality.sj_min) + ")" +
+                                               (folded_map ? " through a folded map (no valid polycube: " +
+                                                                 rr.failure + ")"
+                                                           : why));
         }
         MeshData hm;
         hm.V = hr.V;
@@ -944,6 +968,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                          {"capture_creases", opt.hex.capture_creases},
                          {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
                          {"grading_max", opt.hex.grading.max_ratio}};
+        hj["through_folded_map"] = folded_map;
         hj["seconds"] = sh.seconds();
         report["hex"] = hj;
         report["timings"]["hex"] = sh.seconds();

@@ -43,6 +43,13 @@ struct PipelineOptions {
   /// barrier weight times this and extract again (values <= 1: no retry).
   double surface_retry_barrier = 10;
   Stage until = Stage::Tet;    ///< stop after this stage
+  /// Volume mode with Stage::Hex: when no valid polycube is realized but the state the realization
+  /// reached lies on its planes (planarity 1e-9) with at most this many tets inverted, the hexes are
+  /// extracted through that folded map anyway (the snapping's untangling, the hex untangling and
+  /// optimization follow) and kept only if none is inverted; the polycube outputs (polycube.*,
+  /// map.obj) are not written and report.json says polycube.map_valid false with the inverted tets.
+  /// 0 = off (such runs fail with exit code 7, as with Stage::Polycube).
+  int hex_through_folds = 100;
   bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
   io::CadOptions cad;
   ValidateOptions validate;
