@@ -289,6 +289,33 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
                           : realize_compact(CT, CB, CL, merged, ro);
   };
+  // Tet mode: of the failed realizations on their planes with tets inverted, the one with the
+  // fewest (then the fewest triangles facing away), with the labels and triangles it was realized
+  // with: returned instead of the last one when no polycube is realized, since the hexes may still
+  // be extracted through it (PipelineOptions::hex_through_folds; octopus-low: the retries ended at
+  // 1924 inverted tets after a state with 17).
+  std::optional<PolycubeExtraction> best_failed;
+  auto keep_if_best = [&] {
+    const RealizeResult& r = e.realized;
+    if (T.rows() == 0 || r.success || r.X.rows() == 0 || r.T.rows() == 0 || r.inverted == 0 ||
+        !(r.planarity_error <= 1e-9))
+      return;
+    if (best_failed && std::make_pair(best_failed->realized.inverted, best_failed->realized.misoriented_faces) <=
+                           std::make_pair(r.inverted, r.misoriented_faces))
+      return;
+    best_failed = e;
+    PolycubeExtraction& b = *best_failed;
+    b.alternative.reset();
+    for (size_t i = 0; i < cb_row.size(); ++i) b.labels[cb_row[i]] = CL[i];
+    if (collapses > 0) {
+      b.map_B = CB;
+      b.map_labels = CL;
+      b.edge_collapses = collapses;
+      b.collapse_edge_splits = split_edges;
+      b.charts = check_charts(CB, static_cast<int>(rest.rows()), CL);
+    }
+  };
+  keep_if_best();
   // Whether row f of CB faces away from its label (or has no area) in the polycube X (diag: X's
   // bounding-box diagonal).
   auto faces_away = [&](const MatX3d& X, int f, double diag) {
@@ -542,7 +569,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   int warm_kept = 0;  // failed retries from an earlier state kept as the next one's start
   // The retries from the deformed mesh keep to the continuation start, the one that got every tet
   // positive (when both starts were tried, the eq17 start mostly fails after a long untangling).
-  auto realize_again = [&] {
+  auto realize_again_once = [&] {
     if (opt.warm_retries && T.rows() > 0 && e.realized.X.rows() >= cur_rest.rows()) {
       // From the failed realization's state (every vertex of the input numbering; a merged one
       // sits where its partner is).
@@ -578,6 +605,10 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     RealizeOptions ro = opt.realize;
     if (ro.start == "auto" && e.realized.start == "continuation") ro.start = "continuation";
     e.realized = realize_current(ro);
+  };
+  auto realize_again = [&] {
+    realize_again_once();
+    keep_if_best();
   };
   auto realize_after_collapse = [&] {
     realize_again();
@@ -752,7 +783,22 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     ExtractOptions cold = opt;
     cold.warm_retries = false;
     // Its first realization is this pass's (spot at 20k tets, same polycube: 25.1 -> 20.9 s).
-    return extract(rest, T, B, deformed, cold, hooks, &*first_realization);
+    PolycubeExtraction again = extract(rest, T, B, deformed, cold, hooks, &*first_realization);
+    if (again.realized.success || !best_failed) return again;
+    e = std::move(again);
+  }
+  if (!e.realized.success && best_failed) {
+    // The best failed state instead of the last, if better (or the last is no folded state).
+    const RealizeResult& r = e.realized;
+    const bool usable = r.X.rows() > 0 && r.T.rows() > 0 && r.inverted > 0 && r.planarity_error <= 1e-9;
+    const RealizeResult& b = best_failed->realized;
+    if (!usable || std::make_pair(b.inverted, b.misoriented_faces) < std::make_pair(r.inverted, r.misoriented_faces)) {
+      const std::string why = r.failure + "; kept: the state with " + std::to_string(b.inverted) +
+                              " tets inverted and " + std::to_string(b.misoriented_faces) +
+                              " boundary triangles facing away";
+      e = std::move(*best_failed);
+      e.realized.failure = why;
+    }
   }
   return e;
 }
