@@ -765,11 +765,12 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     sync_labels();
     e.edge_collapses = collapses;
     e.collapse_edge_splits = split_edges;
-    if (e.realized.success) {
-      e.map_B = CB;
-      e.map_labels = CL;
-      e.charts = check_charts(CB, static_cast<int>(rest.rows()), CL);
-    } else {
+    // The triangles the state was realized with (also on failure: hexes may be extracted through
+    // a folded state, PipelineOptions::hex_through_folds).
+    e.map_B = CB;
+    e.map_labels = CL;
+    e.charts = check_charts(CB, static_cast<int>(rest.rows()), CL);
+    if (!e.realized.success) {
       e.realized.failure += " (after " + std::to_string(collapses) +
                             " collapses of boundary edges whose ends it pinned to one point)";
     }
@@ -793,7 +794,8 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     const bool usable = r.X.rows() > 0 && r.T.rows() > 0 && r.inverted > 0 && r.planarity_error <= 1e-9;
     const RealizeResult& b = best_failed->realized;
     if (!usable || std::make_pair(b.inverted, b.misoriented_faces) < std::make_pair(r.inverted, r.misoriented_faces)) {
-      const std::string why = r.failure + "; kept: the state with " + std::to_string(b.inverted) +
+      const std::string why = r.failure.substr(0, r.failure.find("; kept: ")) + "; kept: the state with " +
+                              std::to_string(b.inverted) +
                               " tets inverted and " + std::to_string(b.misoriented_faces) +
                               " boundary triangles facing away";
       e = std::move(*best_failed);

@@ -110,17 +110,21 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   if (sn.untangled > 0)
     hooks.debug("constrained snapping: " + std::to_string(sn.untangled) + " tets turned over by the harmonic displacement untangled (" +
                 std::to_string(sn.untangle_sweeps) + " sweeps)");
-  {
-    const std::array<int, 3>& o = sn.overlap_lines;
-    if (o[0] + o[1] + o[2] > 0)
+  if (const std::array<int, 3> o = sn.overlap_lines; o[0] + o[1] + o[2] > 0) {
+    const std::string lines = std::to_string(o[0]) + "/" + std::to_string(o[1]) + "/" + std::to_string(o[2]);
+    if (!opt.folded_map)
       throw Error(ErrorKind::Polycube,
                   "the polycube overlaps itself (lines along x/y/z meeting two faces of the same orientation in a "
-                  "row: " + std::to_string(o[0]) + "/" + std::to_string(o[1]) + "/" + std::to_string(o[2]) +
-                      "), although every tet is positive: a hex grid needs an embedded polycube");
+                  "row: " + lines + "), although every tet is positive: a hex grid needs an embedded polycube");
+    // Around the inverted tets of a folded map: the order constraints read from those lines are
+    // not to be trusted, every plane gets its own integer.
+    hooks.debug("the folded map overlaps itself (lines along x/y/z: " + lines + "): sorted snapping");
+    sn = snap_polycube(X, T, B, labels, s, false);
+    r.snapping = "sorted";
   }
   // A few inverted slivers of negligible volume (in cells) do not matter to point location.
   const double kNegligible = 0.05;
-  if (sn.inverted_volume > kNegligible) {
+  if (sn.inverted_volume > kNegligible && r.snapping == "constrained") {
     hooks.debug("constrained snapping inverts " + std::to_string(sn.inverted) + " tets (" + std::to_string(sn.inverted_volume) + " cells); trying sorted snapping");
     sn = snap_polycube(X, T, B, labels, s, false);
     r.snapping = "sorted";

@@ -93,6 +93,10 @@ struct HexOptions {
   /// (measure "chord", default) or where the map stretches the boundary ("stretch"); strength 0 =
   /// the paper's uniform grid.
   GradingOptions grading;
+  /// The polycube map has inverted tets (PipelineOptions::hex_through_folds): sample lines meeting
+  /// two faces of one orientation in a row (there, around the folds) do not stop the extraction;
+  /// the snapping is then the sorted one (or the piecewise-linear map).
+  bool folded_map = false;
   /// After the optimization, boundary vertices off features slide on the target so that it comes
   /// closer to the hex boundary, no hex around a moved vertex dropping below min(floor, its worst
   /// before) (geometry/surface_fit.h; rounds = 0: off).

@@ -900,6 +900,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.report("hex", 0);
         hooks.info("extracting hexes");
         hex::HexOptions ho = opt.hex;
+        ho.folded_map = folded_map;
         // Hexes inverted or poor next to planes far closer than a cell (a riser kept a cell
         // wide): the planes of thicker steps merged, extracted again, kept when better.
         std::vector<hex::ThinStepRetry> tries;
@@ -922,16 +923,23 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                                                  rr.failure + ")"
                                                            : why));
         }
-        MeshData hm;
-        hm.V = hr.V;
-        hm.H = hr.H;
-        io::write_medit(stage_path("hex.mesh"), hm);
-        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_element}});
         const MatX3i hexF = hex::triangulate_quads(hex::boundary_quads(hr.H));
         const hex::Hausdorff hd = hex::hausdorff(hr.V, hexF, surface.V, surface.F);
         Eigen::AlignedBox3d box;
         for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
         const double diag = box.diagonal().norm();
+        // Through a folded map that also overlaps itself, a part may be missing from the grid: such
+        // hexes are no result.
+        if (folded_map && hd.max > kFarFromInput * diag)
+          throw Error(ErrorKind::Polycube, "the hexes extracted through a folded map are " + std::to_string(hd.max / diag) +
+                                               " of the bbox diagonal from the input (over " +
+                                               std::to_string(kFarFromInput) + "): part of the shape is missing (no "
+                                               "valid polycube: " + rr.failure + ")");
+        MeshData hm;
+        hm.V = hr.V;
+        hm.H = hr.H;
+        io::write_medit(stage_path("hex.mesh"), hm);
+        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_element}});
         auto quality_json = [](const hex::HexQuality& q) {
           json hist = json::array();
           for (int c : q.histogram) hist.push_back(c);

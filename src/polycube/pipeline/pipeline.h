@@ -46,7 +46,9 @@ struct PipelineOptions {
   /// Volume mode with Stage::Hex: when no valid polycube is realized but the state the realization
   /// reached lies on its planes (planarity 1e-9) with at most this many tets inverted, the hexes are
   /// extracted through that folded map anyway (the snapping's untangling, the hex untangling and
-  /// optimization follow) and kept only if none is inverted; the polycube outputs (polycube.*,
+  /// optimization follow) and kept only if none is inverted and their Hausdorff distance to the
+  /// input is under 5% of its bbox diagonal (a map that also overlaps itself may leave a part out
+  /// of the grid); the polycube outputs (polycube.*,
   /// map.obj) are not written and report.json says polycube.map_valid false with the inverted tets.
   /// 0 = off (such runs fail with exit code 7, as with Stage::Polycube).
   int hex_through_folds = 100;
