@@ -293,7 +293,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   // fewest (then the fewest triangles facing away), with the labels and triangles it was realized
   // with: returned instead of the last one when no polycube is realized, since the hexes may still
   // be extracted through it (PipelineOptions::hex_through_folds; octopus-low: the retries ended at
-  // 1924 inverted tets after a state with 17).
+  // 1924 inverted tets after a state with 21).
   std::optional<PolycubeExtraction> best_failed;
   auto keep_if_best = [&] {
     const RealizeResult& r = e.realized;
