@@ -709,6 +709,16 @@ TEST(Cli, HexesThroughAFoldedPolycubeMap) {
   EXPECT_TRUE(fs::exists(dir + "/h/labels.txt"));
   for (const char* f : {"polycube.mesh", "polycube.vtk", "polycube_surface.obj", "map.obj"})
     EXPECT_FALSE(fs::exists(dir + "/h/" + f)) << f;
+  // Quads through the volume the same way.
+  r = run_cli(in + " --quad --quads 600 -o " + dir + "/q");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json q = report(dir + "/q");
+  EXPECT_FALSE(q["polycube"]["map_valid"].get<bool>());
+  EXPECT_TRUE(q["quad"]["through_folded_map"].get<bool>());
+  EXPECT_EQ(q["quad"]["inverted"], 0);
+  EXPECT_GT(q["quad"]["sj_min"].get<double>(), 0.5);
+  EXPECT_TRUE(fs::exists(dir + "/q/quad.obj"));
+  EXPECT_FALSE(fs::exists(dir + "/q/polycube.mesh"));
   // Refused as a polycube, and with --hex-through-folds 0 or under the inverted count: exit 4.
   for (const std::string& extra : std::vector<std::string>{" --until polycube", " --hex --hex-through-folds 0",
                                                            " --hex --hex-through-folds " + std::to_string(inverted - 1)}) {

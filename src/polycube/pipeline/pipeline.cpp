@@ -547,9 +547,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       return X;
     };
     auto read_given_map = [&] {
-      // A few tets inverted pass when hexes are asked for (they may be extracted through the folds).
+      // A few tets inverted pass when hexes or quads are asked for (they may be extracted through the folds).
       return chart::polycube_from_map(tm.V, tm.T, tm.boundary, read_same_tets(opt.polycube_map, "polycube map"), 1e-6,
-                                       opt.until == Stage::Hex ? opt.hex_through_folds : 0);
+                                       opt.until == Stage::Hex || opt.until == Stage::Quad ? opt.hex_through_folds : 0);
     };
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Deform) && given_deformed) {
       // The extraction starts from the given deformation: its figures are measured, nothing is written.
@@ -693,7 +693,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       if (!rr.success) pj["realization"]["failure"] = rr.failure;
       // Hexes asked for and no polycube: the realization's best state may still carry them when it
       // is on the planes with a few tets inverted (PipelineOptions::hex_through_folds).
-      const bool folded_map = !rr.success && opt.until == Stage::Hex && !opt.surface &&
+      const bool folded_map = !rr.success && (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
                               opt.hex_through_folds > 0 && rr.X.rows() > 0 && rr.T.rows() > 0 && rr.inverted > 0 &&
                               rr.inverted <= opt.hex_through_folds && rr.planarity_error <= 1e-9;
       if (!rr.success && !folded_map)
@@ -706,7 +706,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hooks.warn((given_map ? "the polycube map given is folded (" + rr.failure + ")"
                               : "no valid polycube could be realized (" + rr.failure + "); its best state is on the "
                                 "planes with " + std::to_string(rr.inverted) + " tets inverted") +
-                   ": extracting the hexes through that folded map (polycube.* and map.obj are not written; "
+                   ": extracting the " + std::string(opt.until == Stage::Hex ? "hexes" : "quads") +
+                   " through that folded map (polycube.* and map.obj are not written; "
                    "--hex-through-folds 0 turns this off)");
       }
       pj["arap_distortion"] = rr.arap;
@@ -847,6 +848,12 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
             known ? *known : hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
         Eigen::AlignedBox3d box;
         for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+        if (folded_map && hd.max > kFarFromInput * box.diagonal().norm())  // as for hexes
+          throw Error(ErrorKind::Polycube, "the quads extracted through a folded map are " +
+                                               std::to_string(hd.max / box.diagonal().norm()) +
+                                               " of the bbox diagonal from the input (over " +
+                                               std::to_string(kFarFromInput) + "): part of the shape is missing (no "
+                                               "valid polycube: " + rr.failure + ")");
         json hist = json::array();
         for (int c : qr.quality.histogram) hist.push_back(c);
         report["quad"] = {{"count", qr.quality.count},
@@ -883,6 +890,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                           {"grid", grid},
                           {"seconds", seconds_before + sq.seconds()}};
         report["quad"].update(extra);
+        report["quad"]["through_folded_map"] = folded_map;
         report["timings"]["quad"] = seconds_before + sq.seconds();
         hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
                    std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
@@ -1033,6 +1041,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         ho.pillow = "off";
         ho.smooth_iterations = 0;
         ho.fit.rounds = 0;  // the quads are fitted to the surface themselves
+        ho.folded_map = folded_map;
         bool report_grid_optimized = false;
         if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);

@@ -43,7 +43,7 @@ struct PipelineOptions {
   /// barrier weight times this and extract again (values <= 1: no retry).
   double surface_retry_barrier = 10;
   Stage until = Stage::Tet;    ///< stop after this stage
-  /// Volume mode with Stage::Hex: when no valid polycube is realized but the state the realization
+  /// Volume mode with Stage::Hex (or Stage::Quad: the quads the same way): when no valid polycube is realized but the state the realization
   /// reached lies on its planes (planarity 1e-9) with at most this many tets inverted, the hexes are
   /// extracted through that folded map anyway (the snapping's untangling, the hex untangling and
   /// optimization follow) and kept only if none is inverted and their Hausdorff distance to the
