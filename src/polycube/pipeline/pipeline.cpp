@@ -691,8 +691,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                            {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
                            {"seconds", rr.seconds}};
       if (!rr.success) pj["realization"]["failure"] = rr.failure;
-      // Hexes asked for and no polycube: the realization's best state may still carry them when it
-      // is on the planes with a few tets inverted (PipelineOptions::hex_through_folds).
+      // Hexes (or volume-mode quads) asked for and no polycube: the realization's best state may
+      // still carry them when it is on the planes with a few tets inverted
+      // (PipelineOptions::hex_through_folds).
       const bool folded_map = !rr.success && (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
                               opt.hex_through_folds > 0 && rr.X.rows() > 0 && rr.T.rows() > 0 && rr.inverted > 0 &&
                               rr.inverted <= opt.hex_through_folds && rr.planarity_error <= 1e-9;
@@ -700,7 +701,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
       pj["map_valid"] = rr.success;
       if (folded_map) {
-        // Its figures, which the realization leaves unset on failure (distortions over the positive tets).
+        // Its figures, which the realization leaves unset on failure (over every tet, the inverted
+        // ones by their singular values).
         ex.realized.arap = deform::arap_energy(rr.X, rr.T, deform::ArapRest::build(rr.rest, rr.T), 1.0, nullptr, nullptr);
         ex.realized.isometric = chart::isometric_distortion(rr.rest, rr.X, rr.T);
         hooks.warn((given_map ? "the polycube map given is folded (" + rr.failure + ")"
