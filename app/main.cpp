@@ -301,9 +301,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--hex-through-folds", opt.hex_through_folds,
                  "Hex mesh (and quads in volume mode): when no valid polycube is realized but the best state "
-                 "reached lies on its planes with at most this many tets inverted, extract the hexes through that folded map anyway, kept only if "
-                 "none is inverted and they are within 5% of the bbox diagonal of the input (no polycube.* or "
-                 "map.obj is written; 0 = fail instead)")
+                 "reached lies on its planes with at most this many tets inverted, extract the hexes through that "
+                 "folded map anyway, kept only if none is inverted and they are within 5% of the bbox diagonal of "
+                 "the input (no polycube.* or map.obj is written; 0 = fail instead)")
       ->capture_default_str()->check(CLI::Range(0, 1000000));
   app.add_option("--grading", hx.grading.strength,
                  "Hex mesh (and surface-mode quads when given): sheets of hexes denser where cells would cut the "

@@ -271,8 +271,7 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
       // As the CLI's --hex-through-folds (100): a failed realization whose best state is on its
       // planes with a few tets inverted still gives hexes, kept if none is inverted.
-      const bool folded = !rr.success && rr.X.rows() > 0 && rr.T.rows() > 0 && rr.inverted > 0 && rr.inverted <= 100 &&
-                          rr.planarity_error <= 1e-9;
+      const bool folded = chart::is_folded(rr) && rr.inverted <= 100;
       if (rr.success || folded) {
         hex::HexOptions ho;
         ho.grading.strength = grading;

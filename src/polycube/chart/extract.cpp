@@ -297,9 +297,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   std::optional<PolycubeExtraction> best_failed;
   auto keep_if_best = [&] {
     const RealizeResult& r = e.realized;
-    if (T.rows() == 0 || r.success || r.X.rows() == 0 || r.T.rows() == 0 || r.inverted == 0 ||
-        !(r.planarity_error <= 1e-9))
-      return;
+    if (!is_folded(r)) return;
     if (best_failed && std::make_pair(best_failed->realized.inverted, best_failed->realized.misoriented_faces) <=
                            std::make_pair(r.inverted, r.misoriented_faces))
       return;
@@ -791,9 +789,8 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   if (!e.realized.success && best_failed) {
     // The best failed state instead of the last, if better (or the last is no folded state).
     const RealizeResult& r = e.realized;
-    const bool usable = r.X.rows() > 0 && r.T.rows() > 0 && r.inverted > 0 && r.planarity_error <= 1e-9;
     const RealizeResult& b = best_failed->realized;
-    if (!usable || std::make_pair(b.inverted, b.misoriented_faces) < std::make_pair(r.inverted, r.misoriented_faces)) {
+    if (!is_folded(r) || std::make_pair(b.inverted, b.misoriented_faces) < std::make_pair(r.inverted, r.misoriented_faces)) {
       const std::string why = r.failure.substr(0, r.failure.find("; kept: ")) + "; kept: the state with " +
                               std::to_string(b.inverted) +
                               " tets inverted and " + std::to_string(b.misoriented_faces) +

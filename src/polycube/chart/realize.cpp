@@ -1217,6 +1217,10 @@ void check_faces(const MatX3i& B, const std::vector<int>& labels, RealizeResult&
   r.misoriented_faces = count_misoriented(r.X, B, labels, diag);
 }
 
+bool is_folded(const RealizeResult& r) {
+  return !r.success && r.X.rows() > 0 && r.T.rows() > 0 && r.inverted > 0 && r.planarity_error <= 1e-9;
+}
+
 namespace {
 double signed_volume(const MatX3d& X, int a, int b, int c, int d) {
   return tet_volume(X.row(a), X.row(b), X.row(c), X.row(d));

@@ -164,6 +164,10 @@ struct RealizeResult {
   double seconds = 0;
 };
 
+/// A failed tet-mode realization whose state lies on its planes (planarity 1e-9) with tets inverted:
+/// a folded map, through which hexes may still be extracted (PipelineOptions::hex_through_folds).
+bool is_folded(const RealizeResult& r);
+
 /// Realizes the polycube. rest/T/B: the tet mesh and its outward boundary triangles; deformed: the
 /// deformed positions (axis-aligned frame); labels: one per row of B, cleaned (see labeling.h).
 /// Never throws for a geometric failure: returns success = false with the reason. T empty: surface

@@ -694,9 +694,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // Hexes (or volume-mode quads) asked for and no polycube: the realization's best state may
       // still carry them when it is on the planes with a few tets inverted
       // (PipelineOptions::hex_through_folds).
-      const bool folded_map = !rr.success && (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
-                              opt.hex_through_folds > 0 && rr.X.rows() > 0 && rr.T.rows() > 0 && rr.inverted > 0 &&
-                              rr.inverted <= opt.hex_through_folds && rr.planarity_error <= 1e-9;
+      const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
+                              chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
       if (!rr.success && !folded_map)
         throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
       pj["map_valid"] = rr.success;
