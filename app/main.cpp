@@ -293,6 +293,11 @@ int main(int argc, char** argv) {
                  "unless it lowers it, where the hexes are at scaled Jacobian 0.5 or more (0 = no limit: a little "
                  "higher worst scaled Jacobian, and pillow hexes squeezed to slivers)")
       ->capture_default_str()->check(CLI::Range(0.0, 1e6));
+  app.add_flag("--hex-untangle,!--no-hex-untangle", hx.untangle,
+               "Hex mesh: hexes still inverted after the optimization have their inverted corners untangled (the "
+               "elliptic energy on every hex's corner tets, boundary held; then, around what is left, boundary "
+               "vertices freed and put back on the surface) and are optimized again, kept when fewer stay inverted "
+               "(default on)");
   app.add_option("--thin-step-retry", hx.thin_step_retry_below,
                  "Hex mesh: a result whose worst hex is under this scaled Jacobian next to planes closer than 0.05 "
                  "(then 0.25) cells is extracted again with those steps merged, kept when better (0 = only when "

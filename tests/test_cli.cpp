@@ -703,6 +703,7 @@ TEST(Cli, HexesThroughAFoldedPolycubeMap) {
   EXPECT_FALSE(h["polycube"]["realization"]["success"].get<bool>());
   EXPECT_EQ(h["polycube"]["inverted_tets"], inverted);
   EXPECT_TRUE(h["hex"]["through_folded_map"].get<bool>());
+  EXPECT_LT(h["hex"]["volume_outside_rel"].get<double>(), 0.005);  // no gap filled
   EXPECT_EQ(h["hex"]["inverted"], 0);
   EXPECT_GT(h["hex"]["sj_min"].get<double>(), 0.5);
   EXPECT_TRUE(fs::exists(dir + "/h/hex.mesh"));

@@ -11,7 +11,9 @@
 #include "polycube/hex/extract.h"
 #include "polycube/hex/grading.h"
 #include "polycube/hex/quality.h"
+#include "polycube/hex/optimize.h"
 #include "polycube/hex/snap.h"
+#include "polycube/hex/untangle.h"
 #include "test_util.h"
 
 using namespace polycube;
@@ -443,6 +445,155 @@ TEST(Hex, PillowedBoxHasOneLayerMoreAndNoInvertedHex) {
   // The boundary stays on the box.
   const MatX3i F = hex::triangulate_quads(hex::boundary_quads(r.H));
   EXPECT_LT(hex::hausdorff(r.V, F, s.V, s.F, 20000).max, 1e-9);
+}
+
+namespace {
+// n x n x n unit hexes; vertex (i, j, k) has id i + (n + 1) (j + (n + 1) k).
+void hex_grid(int n, MatX3d& V, MatX8i& H) {
+  const int m = n + 1;
+  V.resize(m * m * m, 3);
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) V.row(i + m * (j + m * k)) << i, j, k;
+  H.resize(n * n * n, 8);
+  int h = 0;
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i, ++h) {
+        const int o = i + m * (j + m * k);
+        H.row(h) << o, o + 1, o + 1 + m, o + m, o + m * m, o + 1 + m * m, o + 1 + m + m * m, o + m + m * m;
+      }
+}
+}  // namespace
+
+TEST(Hex, CornerTetsArePositiveExactlyWhereTheHexCornersAre) {
+  MatX3d V;
+  MatX8i H;
+  hex_grid(1, V, H);
+  const MatX4i T = hex::hex_corner_tets(H);
+  ASSERT_EQ(T.rows(), 8);
+  EXPECT_EQ(hex::inverted_hex_corners(V, H), 0);
+  for (int j = 0; j < 8; ++j) {
+    const Vec3 o = V.row(T(j, 0)).transpose();
+    EXPECT_NEAR((V.row(T(j, 1)).transpose() - o).dot((V.row(T(j, 2)).transpose() - o).cross(V.row(T(j, 3)).transpose() - o)),
+                1.0, 1e-12);
+  }
+  // Vertex 6 pushed through the opposite corner: corner 6 and the three next to it turn over.
+  V.row(H(0, 6)) << -0.5, -0.5, -0.5;
+  EXPECT_EQ(hex::inverted_hex_corners(V, H), 4);
+  std::array<Vec3, 8> p;
+  for (int i = 0; i < 8; ++i) p[i] = V.row(H(0, i)).transpose();
+  const std::array<double, 9> sj = hex::scaled_jacobian_samples(p);
+  for (int j = 0; j < 8; ++j) EXPECT_EQ(sj[j] > 0, j != 6 && j != 2 && j != 5 && j != 7) << j;
+}
+
+TEST(Hex, FoldedInteriorIsUntangledWhereTheLocalOptimizationStops) {
+  // A 6^3 grid whose interior vertices are thrown about by up to 0.9 cells (hexes folded over
+  // one another), and one vertex pushed two cells through its neighbours; the boundary fixed.
+  MatX3d V;
+  MatX8i H;
+  const int n = 6, m = n + 1;
+  hex_grid(n, V, H);
+  std::vector<char> fixed(V.rows(), 0);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.9, 0.9);
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) {
+        const int v = i + m * (j + m * k);
+        if (i == 0 || j == 0 || k == 0 || i == n || j == n || k == n) {
+          fixed[v] = 1;
+        } else {
+          V.row(v) += Eigen::RowVector3d(u(rng), u(rng), u(rng));
+        }
+      }
+  V.row(3 + m * (3 + m * 3)) << 4.9, 3.2, 2.8;
+  const MatX3d V0 = V;
+  const int before = hex::inverted_hex_corners(V, H);
+  ASSERT_GT(before, 50);
+  ASSERT_GT(hex::hex_quality(V, H).inverted, 20);
+
+  // The local optimization alone (the boundary fixed, no surface) leaves hexes inverted.
+  MatX3d Vo = V;
+  const std::vector<std::array<int, 2>> slide(V.rows(), {-1, -1});
+  hex::optimize_hexes(Vo, H, fixed, slide, nullptr, nullptr, 30, 0.9);
+  const int optimized_only = hex::hex_quality(Vo, H).inverted;
+  EXPECT_GT(optimized_only, 0);
+
+  const hex::HexUntangleStats st = hex::untangle_hex_corners(V, H, fixed);
+  EXPECT_EQ(st.corners_before, before);
+  EXPECT_EQ(st.corners_after, 0);
+  EXPECT_EQ(hex::inverted_hex_corners(V, H), 0);
+  for (int v = 0; v < V.rows(); ++v) {
+    if (fixed[v]) {
+      EXPECT_EQ(V.row(v), V0.row(v)) << v;
+    }
+  }
+  hex::optimize_hexes(V, H, fixed, slide, nullptr, nullptr, 30, 0.9);
+  const hex::HexQuality q = hex::hex_quality(V, H);
+  EXPECT_EQ(q.inverted, 0) << "the local optimization alone left " << optimized_only;
+  EXPECT_GT(q.sj_min, 0.3);
+  // A mesh without inverted corners is left alone.
+  const MatX3d V1 = V;
+  EXPECT_EQ(hex::untangle_hex_corners(V, H, fixed).sweeps, 0);
+  EXPECT_EQ(V, V1);
+}
+
+TEST(Hex, AFoldedBoundaryQuadIsOpenedBySlidingOnTheSurface) {
+  // A boundary vertex of a 5^3 grid pushed within its face (z = 0) past its neighbour: its
+  // boundary quads fold over on the face, which no interior move can open.
+  MatX3d V;
+  MatX8i H;
+  const int n = 5, m = n + 1;
+  hex_grid(n, V, H);
+  std::vector<char> fixed(V.rows(), 0), slide(V.rows(), 0);
+  for (int k = 0; k < m; ++k)
+    for (int j = 0; j < m; ++j)
+      for (int i = 0; i < m; ++i) {
+        const int v = i + m * (j + m * k);
+        const bool border = i == 0 || j == 0 || k == 0 || i == n || j == n || k == n;
+        fixed[v] = border;
+        slide[v] = k == 0 && i > 0 && j > 0 && i < n && j < n;  // the inside of the bottom face
+      }
+  const int pushed = 2 + m * 2;
+  V.row(pushed) << 3.6, 2.3, 0;
+  const int before = hex::inverted_hex_corners(V, H);
+  ASSERT_GT(before, 0);
+  // Held, it stays folded.
+  MatX3d Vh = V;
+  EXPECT_GT(hex::untangle_hex_corners(Vh, H, fixed).corners_after, 0);
+  // Sliding on the plane z = 0, it opens; the face's vertices stay on it.
+  std::vector<char> hold = fixed;
+  for (int v = 0; v < V.rows(); ++v)
+    if (slide[v]) hold[v] = 0;
+  int projections = 0;
+  const hex::SurfaceProjection plane = [&](int, const Vec3& p, Vec3& normal) {
+    ++projections;
+    normal = -Vec3::UnitZ();
+    return Vec3(p.x(), p.y(), 0);
+  };
+  const hex::HexUntangleStats st = hex::untangle_hex_corners(V, H, hold, 4, 200, 0.05, plane, &slide);
+  EXPECT_EQ(st.corners_before, before);
+  EXPECT_EQ(st.corners_after, 0);
+  EXPECT_EQ(hex::inverted_hex_corners(V, H), 0);
+  EXPECT_GT(projections, 0);
+  for (int v = 0; v < V.rows(); ++v) {
+    if (slide[v]) {
+      EXPECT_EQ(V(v, 2), 0.0) << v;
+    }
+  }
+  EXPECT_GT(hex::hex_quality(V, H).sj_min, 0);
+}
+
+TEST(Hex, VolumeOutsideACloseSurfaceIsMeasured) {
+  // 4^3 unit hexes filling [0, 4]^3 against the box [0, 4] x [0, 4] x [0, 3]: a quarter outside;
+  // against [0, 4]^3 itself (centres well inside): none.
+  MatX3d V;
+  MatX8i H;
+  hex_grid(4, V, H);
+  const SurfaceMesh low = box(Vec3(0, 0, 0), Vec3(4, 4, 3)), same = box(Vec3(0, 0, 0), Vec3(4, 4, 4));
+  EXPECT_NEAR(hex::volume_outside(V, H, low.V, low.F), 0.25, 1e-12);
+  EXPECT_NEAR(hex::volume_outside(V, H, same.V, same.F), 0.0, 1e-12);
 }
 
 TEST(Hex, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {

@@ -15,6 +15,7 @@
 #include "polycube/hex/grading.h"
 #include "polycube/hex/optimize.h"
 #include "polycube/hex/snap.h"
+#include "polycube/hex/untangle.h"
 
 namespace polycube::hex {
 
@@ -44,6 +45,8 @@ double tet_volume(const MatX3d& X, const MatX4i& T, int t) {
 
 // Crease runs are kept when their hexes are at least this good (or as good as the worst elsewhere).
 constexpr double kCaptureFloor = 0.3;
+// The hex untangling opens corners under this fraction of the mean corner volume ratio.
+constexpr double kOpenCorners = 0.05;
 
 struct GridKeyHash {
   size_t operator()(const std::array<int, 3>& k) const {
@@ -300,6 +303,7 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     MatX8i H;
     HexQuality extracted, quality;
     int pillow_hexes = 0, moves = 0, captured = 0;
+    int untangle_before = 0, untangle_after = -1;
     geometry::SurfaceFitStats fit;
     std::vector<char> fixed;
     std::vector<std::array<int, 2>> slide;
@@ -420,6 +424,83 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                        opt.max_edge_ratio, quiet);
     }
     c.quality = hex_quality(c.V, c.H);
+    if (opt.untangle && c.quality.inverted > 0) {
+      // The local optimization stops at folds that need a move making one hex worse first: the
+      // inverted corners are untangled with the boundary and features held, then optimized again.
+      const MatX4i Qc = boundary_quads(c.H);
+      std::vector<char> hold = fixed;
+      hold.resize(c.V.rows(), 0);
+      for (int q = 0; q < Qc.rows(); ++q)
+        for (int j = 0; j < 4; ++j) hold[Qc(q, j)] = 1;
+      for (size_t v = 0; v < sl.size(); ++v)
+        if (sl[v][0] >= 0) hold[v] = 1;
+      MatX3d U = c.V;
+      HexUntangleStats us = untangle_hex_corners(U, c.H, hold, 4, 200, kOpenCorners);
+      if (us.corners_after > 0 && tree) {
+        // A corner on the boundary whose two boundary edges fold over (a quad folded on the
+        // surface) cannot be opened from inside: the boundary vertices of the hexes with inverted
+        // corners and of the hexes next to them slide on the target (on their smooth patch).
+        const MatX4i Tc = hex_corner_tets(c.H);
+        std::vector<char> bad_vertex(U.rows(), 0), release(U.rows(), 0);
+        for (int t = 0; t < Tc.rows(); ++t) {
+          const Vec3 o = U.row(Tc(t, 0)).transpose();
+          const double d = (U.row(Tc(t, 1)).transpose() - o)
+                               .dot((U.row(Tc(t, 2)).transpose() - o).cross(U.row(Tc(t, 3)).transpose() - o));
+          if (!(d > 0))
+            for (int i = 0; i < 8; ++i) bad_vertex[c.H(t / 8, i)] = 1;
+        }
+        for (int h = 0; h < c.H.rows(); ++h) {
+          bool near = false;
+          for (int i = 0; i < 8; ++i) near = near || bad_vertex[c.H(h, i)];
+          if (near)
+            for (int i = 0; i < 8; ++i) release[c.H(h, i)] = 1;
+        }
+        std::vector<char> hold_slide = hold, slides(U.rows(), 0);
+        std::vector<int> patch_of(U.rows(), -1);
+        int freed = 0;
+        for (int v = 0; v < U.rows(); ++v)
+          if (release[v] && hold[v] && !(v < static_cast<int>(fixed.size()) && fixed[v]) && sl[v][0] < 0) {
+            hold_slide[v] = 0;
+            slides[v] = 1;
+            if (!patch.empty()) patch_of[v] = patch[tree->closest(U.row(v).transpose()).face];
+            ++freed;
+          }
+        if (freed > 0) {
+          const SurfaceProjection onto = [&](int v, const Vec3& p, Vec3& normal) {
+            const geometry::ClosestHit hit =
+                patch_of[v] >= 0 ? tree->closest(p, nullptr, &patch, patch_of[v]) : tree->closest(p);
+            const Vec3 a = target->V.row(target->F(hit.face, 0)), b = target->V.row(target->F(hit.face, 1)),
+                       cc = target->V.row(target->F(hit.face, 2));
+            normal = (b - a).cross(cc - a).normalized();
+            return hit.point;
+          };
+          const HexUntangleStats slid = untangle_hex_corners(U, c.H, hold_slide, 4, 200, kOpenCorners, onto, &slides);
+          us.sweeps += slid.sweeps;
+          us.corners_after = slid.corners_after;
+          if (report)
+            hooks.debug("hex untangling with " + std::to_string(freed) + " boundary vertices sliding on the input: " +
+                        std::to_string(slid.corners_before) + " -> " + std::to_string(slid.corners_after) +
+                        " inverted corners");
+        }
+      }
+      c.untangle_before = c.quality.inverted;
+      if (us.corners_after < us.corners_before) {
+        optimize_hexes(U, c.H, fixed, sl, tree.get(), patch.empty() ? nullptr : &patch, opt.smooth_iterations,
+                       opt.optimize_below, opt.max_edge_ratio, quiet);
+        const HexQuality q = hex_quality(U, c.H);
+        if (report)
+          hooks.debug("hex untangling: " + std::to_string(us.corners_before) + " -> " +
+                      std::to_string(us.corners_after) + " inverted corners in " + std::to_string(us.sweeps) +
+                      " sweeps; inverted hexes " + std::to_string(c.quality.inverted) + " -> " +
+                      std::to_string(q.inverted) + " after optimizing again (min scaled Jacobian " +
+                      std::to_string(q.sj_min) + ")");
+        if (q.inverted < c.quality.inverted) {
+          c.V = std::move(U);
+          c.quality = q;
+          c.untangle_after = q.inverted;
+        }
+      }
+    }
     c.fixed = fixed;
     c.slide = sl;
     return c;
@@ -473,6 +554,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   r.pillow_hexes = best.pillow_hexes;
   r.extracted = best.extracted;
   r.smooth_moves = best.moves;
+  r.untangle_inverted_before = best.untangle_before;
+  r.untangle_inverted_after = best.untangle_after;
   r.fit = best.fit;
   r.grid.conservativeResize(V.rows(), 3);
   for (int v = nv; v < V.rows(); ++v) r.grid.row(v).setConstant(-1);

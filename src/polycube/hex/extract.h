@@ -101,6 +101,10 @@ struct HexOptions {
   /// closer to the hex boundary, no hex around a moved vertex dropping below min(floor, its worst
   /// before) (geometry/surface_fit.h; rounds = 0: off).
   geometry::SurfaceFitOptions fit;
+  /// Hexes still inverted after the optimization: their inverted corners are untangled (every
+  /// vertex but the boundary's and the features' free; hex/untangle.h), the mesh optimized again,
+  /// and the result kept when it has fewer inverted hexes (false: off).
+  bool untangle = true;
 };
 
 struct HexResult {
@@ -129,6 +133,9 @@ struct HexResult {
   HexQuality extracted;           ///< quality right after extraction (and projection, pillowing)
   HexQuality quality;             ///< final quality
   int smooth_moves = 0;           ///< vertex moves accepted by the smoothing
+  /// HexOptions::untangle on the result: its inverted hexes before, and after (kept) or -1 (not
+  /// kept, or not needed).
+  int untangle_inverted_before = 0, untangle_inverted_after = -1;
   geometry::SurfaceFitStats fit;  ///< the fitting of the boundary to the target (target samples to hex boundary)
   double seconds = 0;
 };

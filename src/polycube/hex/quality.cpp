@@ -5,7 +5,9 @@
 #include <map>
 #include <thread>
 
+#include "polycube/core/parallel.h"
 #include "polycube/geometry/closest_point.h"
+#include "polycube/validate/surface.h"
 
 namespace polycube::hex {
 
@@ -21,9 +23,6 @@ double normalized_det(const Vec3& a, const Vec3& b, const Vec3& c) {
 }  // namespace
 
 namespace {
-// Corners: the three edges leaving each corner, in Verdict's order (right-handed for a positive hex).
-constexpr int kCorner[8][4] = {{0, 1, 3, 4}, {1, 2, 0, 5}, {2, 3, 1, 6}, {3, 0, 2, 7},
-                               {4, 7, 5, 0}, {5, 4, 6, 1}, {6, 5, 7, 2}, {7, 6, 4, 3}};
 // Centre: the three principal axes (Verdict's calc_hex_efg 1, 2, 3), as signs of the corners.
 constexpr double kXi[8] = {-1, 1, 1, -1, -1, 1, 1, -1}, kEt[8] = {-1, -1, 1, 1, -1, -1, 1, 1},
                  kZe[8] = {-1, -1, -1, -1, 1, 1, 1, 1};
@@ -32,7 +31,7 @@ constexpr double kXi[8] = {-1, 1, 1, -1, -1, 1, 1, -1}, kEt[8] = {-1, -1, 1, 1, 
 // centre's principal axes).
 void sample_vectors(const std::array<Vec3, 8>& p, int k, Vec3& a, Vec3& b, Vec3& c) {
   if (k < 8) {
-    const auto& q = kCorner[k];
+    const auto& q = kHexCorners[k];
     a = p[q[1]] - p[q[0]];
     b = p[q[2]] - p[q[0]];
     c = p[q[3]] - p[q[0]];
@@ -56,7 +55,7 @@ double scaled_jacobian_sample_gradient(const std::array<Vec3, 8>& p, int k, int 
   // d(a, b, c) / d p[j], each a multiple of the identity.
   double ca, cb, cc;
   if (k < 8) {
-    const auto& q = kCorner[k];
+    const auto& q = kHexCorners[k];
     const double o = j == q[0] ? 1.0 : 0.0;
     ca = (j == q[1] ? 1.0 : 0.0) - o;
     cb = (j == q[2] ? 1.0 : 0.0) - o;
@@ -82,7 +81,7 @@ unsigned scaled_jacobian_dependents(int j) {
   unsigned m = 1u << 8;  // the centre
   for (int k = 0; k < 8; ++k)
     for (int i = 0; i < 4; ++i)
-      if (kCorner[k][i] == j) m |= 1u << k;
+      if (kHexCorners[k][i] == j) m |= 1u << k;
   return m;
 }
 
@@ -287,6 +286,32 @@ Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const 
   h.b_to_a_at = ba.at;
   h.max = std::max(ab.max, ba.max);
   return h;
+}
+
+double volume_outside(const MatX3d& V, const MatX8i& H, const MatX3d& SV, const MatX3i& SF) {
+  std::vector<int> faces(SF.rows());
+  for (int f = 0; f < SF.rows(); ++f) faces[f] = f;
+  const int nh = static_cast<int>(H.rows());
+  std::array<double, 2> total{0, 0}, outside{0, 0};
+  run_pair([&](int part) {
+    for (int h = part; h < nh; h += 2) {
+      Vec3 c = Vec3::Zero();
+      for (int i = 0; i < 8; ++i) c += V.row(H(h, i)).transpose();
+      c /= 8;
+      // The mean of the corners' parallelepiped volumes (exact for a parallelepiped).
+      double vol = 0;
+      for (const auto& k : kHexCorners) {
+        const Vec3 o = V.row(H(h, k[0])).transpose();
+        vol += (V.row(H(h, k[1])).transpose() - o)
+                   .dot((V.row(H(h, k[2])).transpose() - o).cross(V.row(H(h, k[3])).transpose() - o));
+      }
+      vol = std::abs(vol) / 8;
+      total[part] += vol;
+      if (winding_number(SV, SF, faces, c) < 0.5) outside[part] += vol;
+    }
+  });
+  const double all = total[0] + total[1];
+  return all > 0 ? (outside[0] + outside[1]) / all : 0.0;
 }
 
 }  // namespace polycube::hex

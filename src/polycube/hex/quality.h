@@ -16,6 +16,11 @@ inline constexpr int kHexFaces[6][4] = {{0, 3, 2, 1}, {4, 5, 6, 7}, {0, 1, 5, 4}
 /// Local edges of a hexahedron: the bottom and top quads' edges, then the four vertical ones.
 inline constexpr int kHexEdges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6},
                                          {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+/// Corners of a hexahedron: each corner, then the three corners joined to it by an edge in
+/// Verdict's order (right-handed for a positive hex). As a tet (core/types.h convention), row j
+/// is positive exactly when the hex's corner j is.
+inline constexpr int kHexCorners[8][4] = {{0, 1, 3, 4}, {1, 2, 0, 5}, {2, 3, 1, 6}, {3, 0, 2, 7},
+                                          {4, 7, 5, 0}, {5, 4, 6, 1}, {6, 5, 7, 2}, {7, 6, 4, 3}};
 
 /// Scaled Jacobian of one hex (Verdict's hex_scaled_jacobian): the minimum, over the 8 corners
 /// and the centre, of det of the three unit edge (or principal axis) vectors. 1 for a cube or
@@ -90,5 +95,11 @@ struct Hausdorff {
   double rms() const { return std::max(rms_a_to_b, rms_b_to_a); }
 };
 Hausdorff hausdorff(const MatX3d& VA, const MatX3i& FA, const MatX3d& VB, const MatX3i& FB, int samples = 200000);
+
+/// Fraction of the volume of the hexes (V, H) in hexes whose centre lies outside the closed
+/// oriented surface (SV, SF) (generalized winding number under 1/2). About 0 when the hexes fill
+/// the surface's volume; a map that overlaps itself fills gaps of the input (between two legs
+/// pressed together), which the Hausdorff distance, as small as the gap, does not show.
+double volume_outside(const MatX3d& V, const MatX8i& H, const MatX3d& SV, const MatX3i& SF);
 
 }  // namespace polycube::hex

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "polycube/core/error.h"
+#include "polycube/core/topology.h"
 #include "polycube/hex/quality.h"
 #include "polycube/io/readers.h"
 #include "polycube/quad/quad.h"
@@ -140,6 +141,9 @@ nlohmann::json measure_mesh(const MeasureOptions& opt, const Hooks& hooks) {
     const double diag = box.diagonal().norm();
     j["reference"] = {{"path", opt.reference}, {"bbox_diagonal", diag}};
     add_hausdorff(j[key], d, diag, key);
+    // Hexes of a closed reference: how much of their volume lies outside it (gaps filled).
+    if (!quads && border_loops(rs.F).empty())
+      j[key]["volume_outside_rel"] = hex::volume_outside(m.V, m.H, rs.V, rs.F);
   }
   j["seconds"] = sw.seconds();
   return j;

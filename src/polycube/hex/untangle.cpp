@@ -1,0 +1,104 @@
+#include "polycube/hex/untangle.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "polycube/deform/energies.h"
+#include "polycube/deform/untangle.h"
+#include "polycube/hex/quality.h"
+
+namespace polycube::hex {
+
+MatX4i hex_corner_tets(const MatX8i& H) {
+  MatX4i T(8 * H.rows(), 4);
+  for (int h = 0; h < H.rows(); ++h)
+    for (int j = 0; j < 8; ++j)
+      for (int i = 0; i < 4; ++i) T(8 * h + j, i) = H(h, kHexCorners[j][i]);
+  return T;
+}
+
+int inverted_hex_corners(const MatX3d& V, const MatX8i& H) {
+  int n = 0;
+  for (int h = 0; h < H.rows(); ++h)
+    for (const auto& c : kHexCorners) {
+      const Vec3 o = V.row(H(h, c[0])).transpose();
+      const double d = (V.row(H(h, c[1])).transpose() - o)
+                           .dot((V.row(H(h, c[2])).transpose() - o).cross(V.row(H(h, c[3])).transpose() - o));
+      n += !(d > 0);
+    }
+  return n;
+}
+
+namespace {
+
+// Rest shapes: each corner tet a right corner (three orthogonal edges) of its hex's mean edge
+// length in V, weighted by that length cubed.
+deform::ArapRest right_corners(const MatX3d& V, const MatX8i& H) {
+  deform::ArapRest rest;
+  const int nt = static_cast<int>(8 * H.rows());
+  rest.Dm_inv.resize(nt);
+  rest.w.resize(nt);
+  double total = 0;
+  for (int h = 0; h < H.rows(); ++h) {
+    double len = 0;
+    for (const auto& e : kHexEdges) len += (V.row(H(h, e[0])) - V.row(H(h, e[1]))).norm();
+    len = std::max(len / 12, 1e-300);
+    for (int j = 0; j < 8; ++j) {
+      rest.Dm_inv[8 * h + j] = Eigen::Matrix3d::Identity() / len;
+      rest.w[8 * h + j] = len * len * len;
+      total += len * len * len;
+    }
+  }
+  for (double& w : rest.w) w /= std::max(total, 1e-300);
+  return rest;
+}
+
+}  // namespace
+
+HexUntangleStats untangle_hex_corners(MatX3d& V, const MatX8i& H, const std::vector<char>& fixed, int rings,
+                                      int max_sweeps, double open_below, const SurfaceProjection& project,
+                                      const std::vector<char>* slide) {
+  HexUntangleStats st;
+  const MatX4i T = hex_corner_tets(H);
+  const deform::ArapRest rest = right_corners(V, H);
+  const auto held = [&](int v, int) { return v < static_cast<int>(fixed.size()) && fixed[v] != 0; };
+  const auto sliding = [&](int v) {
+    return project && slide && v < static_cast<int>(slide->size()) && (*slide)[v] && !held(v, 0);
+  };
+  // Sliding vertices: the tangent plane at their point of the surface.
+  deform::MoveDirections directions;
+  std::function<void(int, MatX3d&)> after_move;
+  if (project && slide) {
+    directions = [&](int v, const MatX3d& X, Eigen::Matrix3d& B) {
+      if (!sliding(v)) return -1;
+      Vec3 n;
+      project(v, X.row(v).transpose(), n);
+      const Vec3 a = std::abs(n.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+      B.col(0) = n.cross(a).normalized();
+      B.col(1) = n.cross(B.col(0)).normalized();
+      return 2;
+    };
+    after_move = [&](int v, MatX3d& X) {
+      if (!sliding(v)) return;
+      Vec3 n;
+      X.row(v) = project(v, X.row(v).transpose(), n).transpose();
+    };
+  }
+  st.corners_before = st.corners_after = deform::count_inverted(V, T, rest);
+  int left = 0;
+  if (st.corners_before > 0) {
+    MatX3d X = V;
+    st.sweeps = deform::untangle_locally(T, rest, held, X, left, rings, max_sweeps, 0, {}, directions, after_move);
+    const int after = deform::count_inverted(X, T, rest);
+    if (after < st.corners_before) {
+      V = X;
+      st.corners_after = after;
+    }
+  }
+  if (open_below > 0 && st.corners_after == 0)
+    st.sweeps += deform::untangle_locally(T, rest, held, V, left, rings, max_sweeps, open_below, {}, directions,
+                                          after_move);
+  return st;
+}
+
+}  // namespace polycube::hex
