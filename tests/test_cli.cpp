@@ -716,6 +716,7 @@ TEST(Cli, HexesThroughAFoldedPolycubeMap) {
   json q = report(dir + "/q");
   EXPECT_FALSE(q["polycube"]["map_valid"].get<bool>());
   EXPECT_TRUE(q["quad"]["through_folded_map"].get<bool>());
+  EXPECT_LT(q["quad"]["grid_volume_outside_rel"].get<double>(), 0.005);
   EXPECT_EQ(q["quad"]["inverted"], 0);
   EXPECT_GT(q["quad"]["sj_min"].get<double>(), 0.5);
   EXPECT_TRUE(fs::exists(dir + "/q/quad.obj"));

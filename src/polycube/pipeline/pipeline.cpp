@@ -1065,6 +1065,19 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         bool report_grid_optimized = false;
         if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
+        // Through a folded map, as for hexes: a grid filling a gap of the input gives quads
+        // spanning it.
+        double grid_outside = 0;
+        if (folded_map) {
+          const double outside = grid_outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
+          if (outside > kOutsideInput)
+            throw Error(ErrorKind::Polycube,
+                        "the hex grid the quads would come from, through a folded map, puts " +
+                            std::to_string(100 * outside) + "% of its volume outside the input (over " +
+                            std::to_string(100 * kOutsideInput) +
+                            "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
+                            rr.failure + ")");
+        }
         quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
         if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
           // Grid faces straddling a sharp edge the polycube has no edge along can fold when
@@ -1079,7 +1092,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         write_quads(qr, ex.charts.corners, sq, 0, nullptr,
                     {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
                      {"optimized", report_grid_optimized}},
-                    json::object());
+                    folded_map ? json{{"grid_volume_outside_rel", grid_outside}} : json::object());
       }
     }
 
