@@ -424,7 +424,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
                        opt.max_edge_ratio, quiet);
     }
     c.quality = hex_quality(c.V, c.H);
-    if (opt.untangle && c.quality.inverted > 0) {
+    // (Not when the optimization is off: the quad stage takes the grid's boundary as extracted.)
+    if (opt.untangle && opt.smooth_iterations > 0 && c.quality.inverted > 0) {
       // The local optimization stops at folds that need a move making one hex worse first: the
       // inverted corners are untangled with the boundary and features held, then optimized again.
       const MatX4i Qc = boundary_quads(c.H);

@@ -103,7 +103,8 @@ struct HexOptions {
   geometry::SurfaceFitOptions fit;
   /// Hexes still inverted after the optimization: their inverted corners are untangled (every
   /// vertex but the boundary's and the features' free; hex/untangle.h), the mesh optimized again,
-  /// and the result kept when it has fewer inverted hexes (false: off).
+  /// and the result kept when it has fewer inverted hexes (false: off; also off with
+  /// smooth_iterations 0).
   bool untangle = true;
 };
 

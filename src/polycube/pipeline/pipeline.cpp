@@ -1066,7 +1066,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
         // Through a folded map, as for hexes: a grid filling a gap of the input gives quads
-        // spanning it.
+        // spanning it (the hand's grid at 2000 quads: 0.01%).
         double grid_outside = 0;
         if (folded_map) {
           const double outside = grid_outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
