@@ -87,12 +87,25 @@ HexUntangleStats untangle_hex_corners(MatX3d& V, const MatX8i& H, const std::vec
   st.corners_before = st.corners_after = deform::count_inverted(V, T, rest);
   int left = 0;
   if (st.corners_before > 0) {
+    // In runs of kChunk sweeps, keeping the state with the fewest inverted corners (the count
+    // goes up and down on the way); stopped after two runs without a new best.
+    constexpr int kChunk = 20;
     MatX3d X = V;
-    st.sweeps = deform::untangle_locally(T, rest, held, X, left, rings, max_sweeps, 0, {}, directions, after_move);
-    const int after = deform::count_inverted(X, T, rest);
-    if (after < st.corners_before) {
-      V = X;
-      st.corners_after = after;
+    int stale = 0;
+    for (int done = 0; done < max_sweeps && st.corners_after > 0 && stale < 2;) {
+      const int chunk = std::min(kChunk, max_sweeps - done);
+      const int sweeps = deform::untangle_locally(T, rest, held, X, left, rings, chunk, 0, {}, directions, after_move);
+      st.sweeps += sweeps;
+      done += chunk;
+      const int now = deform::count_inverted(X, T, rest);
+      if (now < st.corners_after) {
+        V = X;
+        st.corners_after = now;
+        stale = 0;
+      } else {
+        ++stale;
+      }
+      if (sweeps < chunk) break;  // none left in its region
     }
   }
   if (open_below > 0 && st.corners_after == 0)

@@ -32,8 +32,9 @@ struct HexUntangleStats {
 };
 
 /// Moves the vertices within `rings` corner-tet rings of the inverted corners of H (fixed[v] != 0:
-/// v stays; the caller fixes the boundary) to untangle them. V is changed only where that lowers
-/// the count of inverted corners; otherwise it is left as it was. open_below > 0: once none is
+/// v stays; the caller fixes the boundary) to untangle them, in runs of 20 sweeps, up to
+/// max_sweeps or two runs without fewer inverted corners. V takes the state with the fewest
+/// inverted corners, and is left as it was when none has fewer than at the start. open_below > 0: once none is
 /// inverted, corners whose volume ratio is under open_below x the mean are opened (sweeps kept
 /// while the smallest ratio grows), so that a later small move (back onto a surface) or the
 /// scaled Jacobian's centre sample does not turn them over again.
