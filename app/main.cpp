@@ -296,7 +296,7 @@ int main(int argc, char** argv) {
   app.add_flag("--hex-untangle,!--no-hex-untangle", hx.untangle,
                "Hex mesh: hexes still inverted after the optimization have their inverted corners untangled (the "
                "elliptic energy on every hex's corner tets, boundary held; then, around what is left, boundary "
-               "vertices freed and put back on the surface) and are optimized again, kept when fewer stay inverted "
+               "vertices sliding on the input) and are optimized again, kept when fewer stay inverted "
                "(default on)");
   app.add_option("--thin-step-retry", hx.thin_step_retry_below,
                  "Hex mesh: a result whose worst hex is under this scaled Jacobian next to planes closer than 0.05 "

@@ -441,15 +441,11 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
         // A corner on the boundary whose two boundary edges fold over (a quad folded on the
         // surface) cannot be opened from inside: the boundary vertices of the hexes with inverted
         // corners and of the hexes next to them slide on the target (on their smooth patch).
-        const MatX4i Tc = hex_corner_tets(c.H);
+        const std::vector<char> bad_hex = hexes_with_inverted_corners(U, c.H);
         std::vector<char> bad_vertex(U.rows(), 0), release(U.rows(), 0);
-        for (int t = 0; t < Tc.rows(); ++t) {
-          const Vec3 o = U.row(Tc(t, 0)).transpose();
-          const double d = (U.row(Tc(t, 1)).transpose() - o)
-                               .dot((U.row(Tc(t, 2)).transpose() - o).cross(U.row(Tc(t, 3)).transpose() - o));
-          if (!(d > 0))
-            for (int i = 0; i < 8; ++i) bad_vertex[c.H(t / 8, i)] = 1;
-        }
+        for (int h = 0; h < c.H.rows(); ++h)
+          if (bad_hex[h])
+            for (int i = 0; i < 8; ++i) bad_vertex[c.H(h, i)] = 1;
         for (int h = 0; h < c.H.rows(); ++h) {
           bool near = false;
           for (int i = 0; i < 8; ++i) near = near || bad_vertex[c.H(h, i)];

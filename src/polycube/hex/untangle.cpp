@@ -17,16 +17,29 @@ MatX4i hex_corner_tets(const MatX8i& H) {
   return T;
 }
 
+namespace {
+// Whether corner j of hex h is flat or inverted in V.
+bool corner_inverted(const MatX3d& V, const MatX8i& H, int h, int j) {
+  const auto& c = kHexCorners[j];
+  const Vec3 o = V.row(H(h, c[0])).transpose();
+  const double d = (V.row(H(h, c[1])).transpose() - o)
+                       .dot((V.row(H(h, c[2])).transpose() - o).cross(V.row(H(h, c[3])).transpose() - o));
+  return !(d > 0);
+}
+}  // namespace
+
 int inverted_hex_corners(const MatX3d& V, const MatX8i& H) {
   int n = 0;
   for (int h = 0; h < H.rows(); ++h)
-    for (const auto& c : kHexCorners) {
-      const Vec3 o = V.row(H(h, c[0])).transpose();
-      const double d = (V.row(H(h, c[1])).transpose() - o)
-                           .dot((V.row(H(h, c[2])).transpose() - o).cross(V.row(H(h, c[3])).transpose() - o));
-      n += !(d > 0);
-    }
+    for (int j = 0; j < 8; ++j) n += corner_inverted(V, H, h, j);
   return n;
+}
+
+std::vector<char> hexes_with_inverted_corners(const MatX3d& V, const MatX8i& H) {
+  std::vector<char> bad(H.rows(), 0);
+  for (int h = 0; h < H.rows(); ++h)
+    for (int j = 0; j < 8 && !bad[h]; ++j) bad[h] = corner_inverted(V, H, h, j);
+  return bad;
 }
 
 namespace {

@@ -25,6 +25,9 @@ MatX4i hex_corner_tets(const MatX8i& H);
 /// Corner tets of H (hex_corner_tets) that are flat or inverted in V.
 int inverted_hex_corners(const MatX3d& V, const MatX8i& H);
 
+/// Per hex of H: 1 when one of its corners (hex_corner_tets) is flat or inverted in V.
+std::vector<char> hexes_with_inverted_corners(const MatX3d& V, const MatX8i& H);
+
 struct HexUntangleStats {
   int corners_before = 0;  ///< flat or inverted corner tets at the start
   int corners_after = 0;   ///< ... at the end

@@ -832,6 +832,21 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         deform::l1_measure(rr.X, B, l1, a);
         return a;
       };
+      // Hexes through a folded map (or the grid of volume-mode quads): the share of their volume
+      // outside the input, refused over kOutsideInput. A map that overlaps itself can fill a gap
+      // between two parts pressed together by the folds, at a distance no larger than the gap.
+      // Measured: homer, whose folded map closed the gap between the legs, 2.4%; valid meshes
+      // (rod, bumpy torus, humanoid, the hand through its folds) 0.02-0.03%.
+      auto outside_or_refuse = [&](const hex::HexResult& hr, const std::string& what) {
+        const double outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
+        if (outside > kOutsideInput)
+          throw Error(ErrorKind::Polycube,
+                      what + " put " + std::to_string(100 * outside) + "% of the volume outside the input (over " +
+                          std::to_string(100 * kOutsideInput) +
+                          "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
+                          rr.failure + ")");
+        return outside;
+      };
       // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
       // seconds_before: the quad stage's so far; known: the quads' distance to the surface if
       // measured already (else measured here).
@@ -953,20 +968,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                                " of the bbox diagonal from the input (over " +
                                                std::to_string(kFarFromInput) + "): part of the shape is missing (no "
                                                "valid polycube: " + rr.failure + ")");
-        // ...nor are hexes filling a gap of the input (two parts pressed together by the folds: a
-        // distance as small as the gap). Measured: homer, whose folded map closed the gap between
-        // the legs, 2.4% of the hex volume outside; valid meshes (rod, bumpy torus, humanoid, the
-        // hand through its folds) 0.02-0.03%.
-        double outside = 0;
-        if (folded_map) {
-          outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
-          if (outside > kOutsideInput)
-            throw Error(ErrorKind::Polycube,
-                        "the hexes extracted through a folded map put " + std::to_string(100 * outside) +
-                            "% of their volume outside the input (over " + std::to_string(100 * kOutsideInput) +
-                            "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
-                            rr.failure + ")");
-        }
+        // ...nor are hexes filling a gap of the input.
+        const double outside = folded_map ? outside_or_refuse(hr, "the hexes extracted through a folded map") : 0.0;
         MeshData hm;
         hm.V = hr.V;
         hm.H = hr.H;
@@ -1067,17 +1070,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
         // Through a folded map, as for hexes: a grid filling a gap of the input gives quads
         // spanning it (the hand's grid at 2000 quads: 0.01%).
-        double grid_outside = 0;
-        if (folded_map) {
-          const double outside = grid_outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
-          if (outside > kOutsideInput)
-            throw Error(ErrorKind::Polycube,
-                        "the hex grid the quads would come from, through a folded map, puts " +
-                            std::to_string(100 * outside) + "% of its volume outside the input (over " +
-                            std::to_string(100 * kOutsideInput) +
-                            "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
-                            rr.failure + ")");
-        }
+        const double grid_outside =
+            folded_map ? outside_or_refuse(hr, "the hex grid the quads would come from, through a folded map,") : 0.0;
         quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
         if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
           // Grid faces straddling a sharp edge the polycube has no edge along can fold when
