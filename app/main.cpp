@@ -174,12 +174,17 @@ int main(int argc, char** argv) {
                  "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "
                  "apart (0 = off)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--gap-barrier", d.gap_weight,
+                 "Polycube deformation (volume): weight of the barrier that keeps the gaps between parts (legs, an "
+                 "arm and the body) open, narrower than --thickness-max, at least --thickness-keep of their width; "
+                 "applied in a second deformation when a first one without it closed them (0 = off)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
   app.add_option("--thickness-keep", d.thickness_keep,
-                 "Surface mode: the fraction of their rest thickness thin parts keep at least")
+                 "The fraction of their rest distance thin parts (surface mode) or gaps (volume mode) keep at least")
       ->capture_default_str()->check(CLI::Range(0.01, 0.99));
   app.add_option("--thickness-max", d.thickness_max,
-                 "Surface mode: parts thinner than this fraction of the bounding-box diagonal are held by the "
-                 "thickness barrier")
+                 "Parts (surface mode) or gaps (volume mode) narrower than this fraction of the bounding-box "
+                 "diagonal are held by the thickness barrier")
       ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--volume-boost", d.volume_boost_factor,
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "

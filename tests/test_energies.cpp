@@ -197,6 +197,52 @@ TEST(Energies, AreaBarrierGradientHessianAndKnownValues) {
   EXPECT_TRUE(std::isinf(E(Y, nullptr, nullptr)));
 }
 
+TEST(Energies, GapPairsAcrossTheOutsideBetweenTwoParts) {
+  // Two unit boxes one above the other with a gap of 0.04 between them: the exterior pairs join
+  // the lower box's top face to the upper box's bottom face across the gap (the boxes are thick:
+  // no interior pair), and a gap closed or passed through counts as crushed.
+  const SurfaceMesh lower = grid_box(4), upper = grid_box(4, Vec3(0, 0, 1.04), Vec3(1, 1, 2.04));
+  SurfaceMesh two;
+  two.V.resize(lower.V.rows() + upper.V.rows(), 3);
+  two.V << lower.V, upper.V;
+  two.F.resize(lower.F.rows() + upper.F.rows(), 3);
+  two.F << lower.F, (upper.F.array() + static_cast<int>(lower.V.rows())).matrix();
+  const double diag = std::sqrt(2.0 + 2.04 * 2.04);
+  EXPECT_TRUE(thickness_pairs(two.V, two.F, 0.05 * diag).empty());
+  const std::vector<ThicknessPair> gaps = thickness_pairs(two.V, two.F, 0.05 * diag, true);
+  // Every vertex of the two facing faces but their corners (whose normals lean out by the
+  // triangulation, some beyond the 60 degrees) has its pair, and only those vertices.
+  std::vector<char> paired(two.V.rows(), 0);
+  for (const ThicknessPair& p : gaps) paired[p.v] = 1;
+  for (int v = 0; v < two.V.rows(); ++v) {
+    const bool on_gap = two.V(v, 2) == 1.0 || two.V(v, 2) == 1.04;
+    const bool corner = (two.V(v, 0) == 0 || two.V(v, 0) == 1) && (two.V(v, 1) == 0 || two.V(v, 1) == 1);
+    if (on_gap && !corner) EXPECT_TRUE(paired[v]) << two.V.row(v);
+    if (!on_gap) EXPECT_FALSE(paired[v]) << two.V.row(v);
+  }
+  EXPECT_GE(static_cast<int>(gaps.size()), 2 * (25 - 4));
+  for (const ThicknessPair& p : gaps) {
+    EXPECT_TRUE(p.exterior);
+    EXPECT_NEAR(p.d0, 0.04, 1e-12);
+    const Vec3 q = p.bary[0] * two.V.row(two.F(p.f, 0)) + p.bary[1] * two.V.row(two.F(p.f, 1)) +
+                   p.bary[2] * two.V.row(two.F(p.f, 2));
+    EXPECT_NEAR(std::abs(q.z() - two.V(p.v, 2)), 0.04, 1e-12);
+  }
+  auto lowered = [&](double dz) {  // the upper box moved down by dz
+    MatX3d X = two.V;
+    for (int v = static_cast<int>(lower.V.rows()); v < X.rows(); ++v) X(v, 2) -= dz;
+    return X;
+  };
+  double w = 0;
+  for (const ThicknessPair& p : gaps) w += p.w;
+  EXPECT_EQ(crushed_fraction(lowered(0.01), two.F, gaps, 0.5), 0.0);  // 0.03 left: open
+  EXPECT_NEAR(crushed_fraction(lowered(0.03), two.F, gaps, 0.5), w, 1e-12);  // 0.01 left
+  // Passed through each other by 0.04: as far apart as at rest, but on the wrong sides.
+  EXPECT_NEAR(crushed_fraction(lowered(0.08), two.F, gaps, 0.5), w, 1e-12);
+  EXPECT_EQ(thickness_energy(two.V, two.F, gaps, 0.5, 1.0, nullptr, nullptr), 0.0);
+  EXPECT_GT(thickness_energy(lowered(0.03), two.F, gaps, 0.5, 1.0, nullptr, nullptr), 0.0);
+}
+
 TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
   // A 1 x 1 x 0.04 plate: the vertices inside its top face see the bottom face 0.04 below them
   // (well under 5% of the diagonal), and the other way round.

@@ -453,7 +453,7 @@ double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
   return weight * E;
 }
 
-std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness) {
+std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness, bool exterior) {
   std::vector<ThicknessPair> pairs;
   const int n = static_cast<int>(X.rows());
   std::vector<Vec3> vn(n, Vec3::Zero());
@@ -480,13 +480,15 @@ std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, dou
     const Vec3 nf = area_normal(X, F(h.face, 0), F(h.face, 1), F(h.face, 2));
     const Vec3 d = h.point - x;
     const double d0 = d.norm();
-    if (incident || !(nf.dot(nv) < 0) || !(d0 > 0) || d0 >= max_thickness || d.dot(-nv) < 0.5 * d0) continue;
+    const Vec3 towards = exterior ? nv : Vec3(-nv);
+    if (incident || !(nf.dot(nv) < 0) || !(d0 > 0) || d0 >= max_thickness || d.dot(towards) < 0.5 * d0) continue;
     ThicknessPair p;
     p.v = v;
     p.f = h.face;
     p.bary = h.bary;
     p.d0 = d0;
     p.w = va[v] / total;
+    p.exterior = exterior;
     pairs.push_back(p);
   }
   return pairs;
@@ -500,9 +502,22 @@ Vec3 across(const MatX3d& X, const MatX3i& F, const ThicknessPair& p) {
 }  // namespace
 
 double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep) {
-  double c = 0;
+  std::vector<Vec3> vn;  // area-weighted vertex normals, for the exterior pairs' side test
   for (const ThicknessPair& p : pairs)
-    if (across(X, F, p).norm() < keep * p.d0) c += p.w;
+    if (p.exterior) {
+      vn.assign(X.rows(), Vec3::Zero());
+      for (int f = 0; f < F.rows(); ++f) {
+        const Vec3 N = area_normal(X, F(f, 0), F(f, 1), F(f, 2));
+        for (int k = 0; k < 3; ++k) vn[F(f, k)] += N;
+      }
+      break;
+    }
+  double c = 0;
+  for (const ThicknessPair& p : pairs) {
+    const Vec3 d = across(X, F, p);
+    // (d points from the point across to v: outside v's side while -d . n_v > 0.)
+    if (d.norm() < keep * p.d0 || (p.exterior && !(-d.dot(vn[p.v]) > 0))) c += p.w;
+  }
   return c;
 }
 

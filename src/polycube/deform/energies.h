@@ -118,14 +118,23 @@ struct ThicknessPair {
   Vec3 bary = Vec3::Zero();
   double d0 = 0;  ///< rest distance
   double w = 0;   ///< v's share of the total rest area (a third of its triangles' areas)
+  /// The point is across the gap outside the surface (exterior pairs, volume mode) rather than
+  /// across the part below it.
+  bool exterior = false;
 };
 
 /// For each vertex of the closed surface (X, F): the closest point on a triangle facing the other
 /// way (normal against v's), not incident to v, within 60 degrees of v's inward normal and closer
 /// than max_thickness. Vertices with no such point get no pair (thick parts, open surfaces' borders).
-std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness);
+/// `exterior`: within 60 degrees of v's outward normal instead, i.e. across a gap between two parts
+/// of the shape (two legs, an arm and the body); the tets keep the parts themselves thick, nothing
+/// keeps the gaps open (homer's legs were pressed into each other).
+std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, double max_thickness,
+                                           bool exterior = false);
 
-/// Area fraction (sum of w) of the pairs whose two sides are closer than keep x their rest distance in X.
+/// Area fraction (sum of w) of the pairs whose two sides are closer than keep x their rest distance
+/// in X; exterior pairs also when their two sides have passed through each other (the point across
+/// no longer on v's outer side).
 double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep);
 
 /// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with

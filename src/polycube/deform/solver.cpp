@@ -70,7 +70,8 @@ struct Problem {
   std::vector<std::array<int, 2>> border;
   double border_h = 0;  // length weighting the border edges (see border_l1_energy)
   double area_weight = 0;  // surface mode: weight of the triangle-area barrier (area_barrier_energy)
-  std::vector<ThicknessPair> thickness;  // closed surfaces in surface mode: the two sides of thin parts
+  // Closed surfaces in surface mode: the two sides of thin parts; volume mode: of gaps between parts.
+  std::vector<ThicknessPair> thickness;
 
   double distortion(const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) const {
     return surface ? surface_arap_energy(X, B, srest, 1.0, g, H) : arap_energy(X, T, rest, 1.0, g, H);
@@ -112,15 +113,16 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
     }
   }
   if (!p.thickness.empty()) {
-    e.volume += thickness_energy(X, p.B, p.thickness, p.opt.thickness_keep, p.opt.thickness_weight, g, H);
+    e.volume += thickness_energy(X, p.B, p.thickness, p.opt.thickness_keep,
+                                 p.surface ? p.opt.thickness_weight : p.opt.gap_weight, g, H);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;
     }
   }
   if (p.volume_weight > 0) {
-    e.volume = volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H, p.boost.empty() ? nullptr : &p.boost,
-                                     p.opt.neutral_volume_barrier);
+    e.volume += volume_barrier_energy(X, p.T, p.rest, p.volume_weight, g, H, p.boost.empty() ? nullptr : &p.boost,
+                                      p.opt.neutral_volume_barrier);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;
@@ -267,10 +269,12 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       p.border_h = opt.border_weight * p.area0 / std::max(1e-300, len);
     }
     if (p.border.empty() && opt.thickness_weight > 0) p.thickness = thickness_pairs(X, B, opt.thickness_max);
+  } else if (opt.gap_weight > 0) {
+    p.thickness = thickness_pairs(X, B, opt.thickness_max, true);  // the gaps between parts
   }
   const std::vector<ThicknessPair> watch =
-      watch_thickness && p.surface && p.border.empty() ? thickness_pairs(X, B, opt.thickness_max)
-                                                       : std::vector<ThicknessPair>{};
+      watch_thickness && p.border.empty() ? thickness_pairs(X, B, opt.thickness_max, !p.surface)
+                                          : std::vector<ThicknessPair>{};
   // The schedule's measure: sum|N|_1 / sum|N|_2 - 1 over the normals and, on open surfaces, the
   // larger of that and the same over the border edges.
   // (s, a: sum|N|_1 and the area of Y, from l1_measure.)
@@ -492,8 +496,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
          << ", iterations " << total_iterations;
       hooks.debug(os.str());
     }
-    // Without the thickness barrier (first pass of surface mode): stop as soon as thin parts are
-    // pressed flat, the caller deforms again with the barrier.
+    // Without the thickness barrier (first pass): stop as soon as thin parts are pressed flat
+    // (surface mode) or gaps closed (volume mode); the caller deforms again with the barrier.
     if (!watch.empty()) {
       res.thin_crushed = crushed_fraction(X, B, watch, opt.thickness_keep);
       if (res.thin_crushed > opt.thickness_retry_above) break;
@@ -526,6 +530,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.converged = q < opt.target_quality;
   res.seconds = clock.seconds();
   res.thickness_pairs = static_cast<int>(p.thickness.size());
+  if (!p.thickness.empty()) res.thin_crushed_after = crushed_fraction(X, B, p.thickness, opt.thickness_keep);
   res.factorizations = factorizations;
   res.volume_barrier_weight = p.volume_weight;
   res.boosted_tets = static_cast<int>(std::count_if(p.boost.begin(), p.boost.end(), [](double b) { return b > 1; }));
@@ -572,10 +577,37 @@ std::vector<int> locality_permutation(const MatX3d& V, const MatX3i& B) {
 
 }  // namespace
 
+namespace {
+
+// Volume mode, as deform_surface_to_polycube below: first without the gap barrier (on most shapes
+// no gap closes, and its elements would only change the path), again with it when gaps between
+// parts were closed (homer's legs pressed into each other, a polycube overlapping itself there).
+DeformResult deform_keeping_gaps(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
+                                 const Hooks& hooks) {
+  DeformOptions plain = opt;
+  plain.gap_weight = 0;
+  const bool watch = opt.gap_weight > 0;
+  DeformResult r = deform(V, T, B, plain, hooks, watch);
+  if (!watch || r.thin_crushed <= opt.thickness_retry_above) return r;
+  {
+    std::ostringstream os;
+    os << "gaps between parts were closed (" << 100 * r.thin_crushed << "% of the area under "
+       << opt.thickness_keep << " of its distance across the gap); deforming again with the gap barrier";
+    hooks.info(os.str());
+  }
+  const double first_seconds = r.seconds, crushed = r.thin_crushed;
+  r = deform(V, T, B, opt, hooks);
+  r.thin_crushed = crushed;
+  r.seconds += first_seconds;
+  return r;
+}
+
+}  // namespace
+
 DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
                                 const Hooks& hooks) {
   POLYCUBE_ASSERT(T.rows() > 0, "deform_to_polycube needs tets (deform_surface_to_polycube for a surface)");
-  if (!opt.locality_order) return deform(V, T, B, opt, hooks);
+  if (!opt.locality_order) return deform_keeping_gaps(V, T, B, opt, hooks);
   const std::vector<int> perm = locality_permutation(V, B);
   MatX3d V2(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
@@ -589,7 +621,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX4i T2(T.rows(), 4);
   for (int t = 0; t < T.rows(); ++t)
     for (int k = 0; k < 4; ++k) T2(t, k) = perm[T(order[t], k)];
-  DeformResult r = deform(V2, T2, B, opt, hooks);  // boundary ids are unchanged
+  DeformResult r = deform_keeping_gaps(V2, T2, B, opt, hooks);  // boundary ids are unchanged
   MatX3d X(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
   r.X = std::move(X);

@@ -484,7 +484,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"volume_barrier_weight", dr.volume_barrier_weight},
                  {"boosted_tets", dr.boosted_tets},
                  {"thickness_pairs", dr.thickness_pairs},
-                 {"thin_crushed", dr.thin_crushed}};
+                 {"thin_crushed", dr.thin_crushed},
+                 {"thin_crushed_after", dr.thin_crushed_after}};
       pj["rotation"] = json::array();
       for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
       json hist = json::array();
@@ -502,6 +503,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"volume_boost", opt.deform.volume_boost_factor},
                        {"thickness", opt.deform.thickness_weight},
                        {"thickness_keep", opt.deform.thickness_keep},
+                       {"gap_barrier", opt.deform.gap_weight},
                        {"max_alpha_steps", opt.deform.max_alpha_steps},
                        {"max_inner_iterations", opt.deform.max_inner_iterations},
                        {"target_quality", opt.deform.target_quality},
