@@ -219,6 +219,19 @@ TEST(Hex, TetLocatorFindsTheContainingTet) {
   }
   // Outside: found, with a negative min barycentric coordinate.
   EXPECT_LT(loc.locate(Vec3(1.5, 1, 1)).min_bary, -1e-3);
+  // Two boxes far apart: a point halfway has no tet within the three rings of buckets searched
+  // around it, and still gets one (the nearest by barycentric coordinates, in either box).
+  MatX3d V2(2 * tm.V.rows(), 3);
+  V2 << tm.V, (tm.V.rowwise() + Eigen::RowVector3d(20, 20, 20));
+  MatX4i T2(2 * tm.T.rows(), 4);
+  T2 << tm.T, (tm.T.array() + static_cast<int>(tm.V.rows())).matrix();
+  const geometry::TetHit far = geometry::TetLocator(V2, T2).locate(Vec3(10.5, 11, 11.5));
+  EXPECT_GE(far.tet, 0);
+  EXPECT_LT(far.min_bary, -1);
+  // Non-finite coordinates (a snapped polycube gone wrong) are refused, not bucketed out of range.
+  MatX3d bad = tm.V;
+  bad(3, 1) = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(geometry::TetLocator(bad, tm.T), Error);
 }
 
 TEST(Hex, SnappingKeepsPlanesApartAndInOrder) {

@@ -3,9 +3,13 @@
 #include <algorithm>
 #include <cmath>
 
+#include "polycube/core/error.h"
+
 namespace polycube::geometry {
 
 TetLocator::TetLocator(const MatX3d& V, const MatX4i& T) : V_(V), T_(T) {
+  // (Non-finite coordinates would give a non-finite bucket grid, and indices out of range.)
+  POLYCUBE_ASSERT(V.allFinite(), "TetLocator: non-finite vertex coordinates");
   const int nt = static_cast<int>(T.rows());
   inv_.resize(nt);
   for (int v = 0; v < V.rows(); ++v) box_.extend(V.row(v).transpose());
@@ -58,18 +62,18 @@ TetHit TetLocator::locate(const Vec3& p) const {
   TetHit hit;
   if (T_.rows() == 0) return hit;
   const int c[3] = {bucket_of(p, 0), bucket_of(p, 1), bucket_of(p, 2)};
+  auto consider = [&](int t) {
+    const Eigen::Vector4d w = barycentric(t, p);
+    const double m = w.minCoeff();  // NaN for a flat tet: never taken
+    if (m > hit.min_bary) {
+      hit.min_bary = m;
+      hit.tet = t;
+      hit.bary = w;
+    }
+  };
   auto scan = [&](int x, int y, int z) {
     const size_t b = (static_cast<size_t>(x) * dims_[1] + y) * dims_[2] + z;
-    for (int i = start_[b]; i < start_[b + 1]; ++i) {
-      const int t = items_[i];
-      const Eigen::Vector4d w = barycentric(t, p);
-      const double m = w.minCoeff();
-      if (m > hit.min_bary) {
-        hit.min_bary = m;
-        hit.tet = t;
-        hit.bary = w;
-      }
-    }
+    for (int i = start_[b]; i < start_[b + 1]; ++i) consider(items_[i]);
   };
   scan(c[0], c[1], c[2]);
   // Outside (or on the boundary up to round-off): widen the search ring by ring.
@@ -78,6 +82,10 @@ TetHit TetLocator::locate(const Vec3& p) const {
       for (int y = std::max(0, c[1] - r); y <= std::min(dims_[1] - 1, c[1] + r); ++y)
         for (int z = std::max(0, c[2] - r); z <= std::min(dims_[2] - 1, c[2] + r); ++z)
           if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) == r) scan(x, y, z);
+  // No tet within three rings of buckets (far outside, or only flat tets there: a folded map):
+  // every tet, so that a point always gets one.
+  if (hit.tet < 0)
+    for (int t = 0; t < T_.rows(); ++t) consider(t);
   return hit;
 }
 

@@ -9,7 +9,7 @@
 namespace polycube::geometry {
 
 struct TetHit {
-  int tet = -1;       ///< containing tet, or the nearest one found when the point lies outside
+  int tet = -1;       ///< containing tet, or the nearest one found when the point lies outside (-1 only when every tet is flat)
   Eigen::Vector4d bary = Eigen::Vector4d::Zero();  ///< barycentric coordinates in that tet (may be < 0 outside)
   double min_bary = -1e300;  ///< min of bary: >= 0 (up to round-off) inside the tet
 };

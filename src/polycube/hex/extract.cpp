@@ -133,9 +133,12 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     r.snapping = "sorted";
   }
   std::array<AxisMap, 3> maps;
-  const bool piecewise = sn.inverted_volume > kNegligible;
+  // (Through a folded map the snapping's harmonic displacement may come out non-finite: homer with
+  // --gap-barrier 1, a crash in the point location before.)
+  const bool piecewise = sn.inverted_volume > kNegligible || !sn.Y.allFinite();
   if (piecewise) {
-    hooks.debug("sorted snapping inverts " + std::to_string(sn.inverted) + " tets; using the piecewise-linear map");
+    hooks.debug("sorted snapping inverts " + std::to_string(sn.inverted) + " tets" +
+                (sn.Y.allFinite() ? "" : " (non-finite coordinates)") + "; using the piecewise-linear map");
     r.snapping = "piecewise_linear";
   }
   for (int k = 0; k < 3; ++k) {
@@ -160,6 +163,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
              r.snapping + " snapping");
 
   // ---- cells inside the snapped polycube ------------------------------------------------
+  if (!(piecewise ? X : sn.Y).allFinite())
+    throw Error(ErrorKind::Polycube, std::string("the ") + (piecewise ? "graded" : "snapped") +
+                                         " polycube has non-finite coordinates (through a folded map?): no hex grid");
   const geometry::TetLocator loc(piecewise ? X : sn.Y, T);
   auto query = [&](double gx, double gy, double gz) {
     return piecewise ? loc.locate(Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz)))
@@ -196,6 +202,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     if (v % 4096 == 0) hooks.report("hex", 0.4 + 0.2 * v / nv);
     r.grid.row(v) << gv[v][0], gv[v][1], gv[v][2];
     const geometry::TetHit hit = query(gv[v][0], gv[v][1], gv[v][2]);
+    if (hit.tet < 0)
+      throw Error(ErrorKind::Polycube, "hex-grid vertex (" + std::to_string(gv[v][0]) + ", " + std::to_string(gv[v][1]) +
+                                           ", " + std::to_string(gv[v][2]) + ") lies in no tet of the polycube (every tet flat)");
     if (hit.min_bary < -1e-6) ++r.max_locate_outside;
     Eigen::Vector4d b = hit.bary.cwiseMax(0.0);
     b /= b.sum();

@@ -206,7 +206,15 @@ Grading grade_polycube(const MatX3d& rest, const MatX4i& T, const MatX3d& X, con
     for (int k = 0; k < 3; ++k) fixed[k].assign(nv, 0);
     for (int f = 0; f < B.rows(); ++f)
       for (int c = 0; c < 3; ++c) fixed[labels[f] / 2][B(f, c)] = 1;
+    // The untangling's rest shape is the polycube X: through a folded map (flat or inverted tets
+    // there) it can make things worse, or non-finite (homer with --gap-barrier 1: 16 tets turned
+    // over, 31432 after); then the warped polycube is kept as it was, those tets turned over.
+    const MatX3d before = g.Y;
     chart::untangle_tets_locally(X, T, fixed, g.Y, g.left_inverted);
+    if (!g.Y.allFinite() || g.left_inverted > g.turned_over) {
+      g.Y = before;
+      g.left_inverted = g.turned_over;
+    }
   }
   return g;
 }
