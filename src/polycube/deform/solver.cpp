@@ -579,20 +579,27 @@ std::vector<int> locality_permutation(const MatX3d& V, const MatX3i& B) {
 
 namespace {
 
-// Volume mode, as deform_surface_to_polycube below: first without the gap barrier (on most shapes
-// no gap closes, and its elements would only change the path), again with it when gaps between
-// parts were closed (homer's legs pressed into each other, a polycube overlapping itself there).
-DeformResult deform_keeping_gaps(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
-                                 const Hooks& hooks) {
+// The shape is deformed without its mode's barrier first (surface mode: across thin parts; volume
+// mode: across the gaps between parts). On most shapes nothing is pressed, and the barrier's
+// elements would only change the factorizations' rounding and so the SQP path. It is deformed
+// again from rest with the barrier when the first pass, which stops at the end of the schedule step
+// where that shows (spot in surface mode: after step 8 of 14), pressed them (homer's legs pressed
+// into each other in volume mode).
+DeformResult deform_with_barrier_if_pressed(const MatX3d& V, const MatX4i& T, const MatX3i& B,
+                                            const DeformOptions& opt, const Hooks& hooks) {
+  const bool surface = T.rows() == 0;
   DeformOptions plain = opt;
-  plain.gap_weight = 0;
-  const bool watch = opt.gap_weight > 0;
+  double& weight = surface ? plain.thickness_weight : plain.gap_weight;
+  const bool watch = weight > 0 && (!surface || border_edges(B).empty());
+  weight = 0;
   DeformResult r = deform(V, T, B, plain, hooks, watch);
   if (!watch || r.thin_crushed <= opt.thickness_retry_above) return r;
   {
     std::ostringstream os;
-    os << "gaps between parts were closed (" << 100 * r.thin_crushed << "% of the area under "
-       << opt.thickness_keep << " of its distance across the gap); deforming again with the gap barrier";
+    os << (surface ? "thin parts were pressed flat (" : "gaps between parts were closed (") << 100 * r.thin_crushed
+       << "% of the area under " << opt.thickness_keep
+       << (surface ? " of its thickness); deforming again with the thickness barrier"
+                   : " of its distance across the gap); deforming again with the gap barrier");
     hooks.info(os.str());
   }
   const double first_seconds = r.seconds, crushed = r.thin_crushed;
@@ -607,7 +614,7 @@ DeformResult deform_keeping_gaps(const MatX3d& V, const MatX4i& T, const MatX3i&
 DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
                                 const Hooks& hooks) {
   POLYCUBE_ASSERT(T.rows() > 0, "deform_to_polycube needs tets (deform_surface_to_polycube for a surface)");
-  if (!opt.locality_order) return deform_keeping_gaps(V, T, B, opt, hooks);
+  if (!opt.locality_order) return deform_with_barrier_if_pressed(V, T, B, opt, hooks);
   const std::vector<int> perm = locality_permutation(V, B);
   MatX3d V2(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
@@ -621,7 +628,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX4i T2(T.rows(), 4);
   for (int t = 0; t < T.rows(); ++t)
     for (int k = 0; k < 4; ++k) T2(t, k) = perm[T(order[t], k)];
-  DeformResult r = deform_keeping_gaps(V2, T2, B, opt, hooks);  // boundary ids are unchanged
+  DeformResult r = deform_with_barrier_if_pressed(V2, T2, B, opt, hooks);  // boundary ids are unchanged
   MatX3d X(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
   r.X = std::move(X);
@@ -630,26 +637,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
 
 DeformResult deform_surface_to_polycube(const MatX3d& V, const MatX3i& F, const DeformOptions& opt,
                                         const Hooks& hooks) {
-  // First without the thickness barrier (on most shapes no thin part is pressed flat, and the
-  // barrier's elements would only change the factorizations' rounding and so the SQP path); again
-  // with it when thin parts were folded flat.
-  // The first pass stops at the end of the schedule step where that shows (spot: after step 8 of 14).
-  DeformOptions plain = opt;
-  plain.thickness_weight = 0;
-  const bool watch = opt.thickness_weight > 0 && border_edges(F).empty();
-  DeformResult r = deform(V, MatX4i(0, 4), F, plain, hooks, watch);
-  if (!watch || r.thin_crushed <= opt.thickness_retry_above) return r;
-  {
-    std::ostringstream os;
-    os << "thin parts were pressed flat (" << 100 * r.thin_crushed << "% of the area under "
-       << opt.thickness_keep << " of its thickness); deforming again with the thickness barrier";
-    hooks.info(os.str());
-  }
-  const double first_seconds = r.seconds, crushed = r.thin_crushed;
-  r = deform(V, MatX4i(0, 4), F, opt, hooks);
-  r.thin_crushed = crushed;
-  r.seconds += first_seconds;
-  return r;
+  return deform_with_barrier_if_pressed(V, MatX4i(0, 4), F, opt, hooks);
 }
 
 }  // namespace polycube::deform
