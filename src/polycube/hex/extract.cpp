@@ -163,9 +163,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
              r.snapping + " snapping");
 
   // ---- cells inside the snapped polycube ------------------------------------------------
-  if (!(piecewise ? X : sn.Y).allFinite())
-    throw Error(ErrorKind::Polycube, std::string("the ") + (piecewise ? "graded" : "snapped") +
-                                         " polycube has non-finite coordinates (through a folded map?): no hex grid");
+  // (A non-finite snapping took the piecewise-linear map above: only X is left to check.)
+  if (piecewise && !X.allFinite())
+    throw Error(ErrorKind::Polycube, "the polycube has non-finite coordinates (through a folded map?): no hex grid");
   const geometry::TetLocator loc(piecewise ? X : sn.Y, T);
   auto query = [&](double gx, double gy, double gz) {
     return piecewise ? loc.locate(Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz)))
