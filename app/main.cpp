@@ -315,6 +315,9 @@ int main(int argc, char** argv) {
                  "folded map anyway, kept only if none is inverted and they are within 5% of the bbox diagonal of "
                  "the input (no polycube.* or map.obj is written; 0 = fail instead)")
       ->capture_default_str()->check(CLI::Range(0, 1000000));
+  app.add_flag("--write-failed", opt.write_failed,
+               "When no valid polycube is realized, write the state reached to OUTDIR/failed_polycube.vtk "
+               "(cell fields label and inverted) for inspection; the run still fails (exit code 7)");
   app.add_option("--grading", hx.grading.strength,
                  "Hex mesh (and surface-mode quads when given): sheets of hexes denser where cells would cut the "
                  "curved surface more (exponent on the measure: 0 = uniform grid, as the paper's; 1 = full)")

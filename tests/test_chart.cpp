@@ -1,4 +1,6 @@
 // Chart labelling, cleanup and exact polycube realization on shapes with known answers.
+#include <algorithm>
+#include <fstream>
 #include <map>
 #include <random>
 #include <set>
@@ -8,6 +10,7 @@
 #include "polycube/core/topology.h"
 #include "polycube/deform/solver.h"
 #include "polycube/examples/examples.h"
+#include "polycube/pipeline/pipeline.h"
 #include "polycube/validate/tetmesh.h"
 #include "test_util.h"
 
@@ -432,6 +435,33 @@ TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {
   EXPECT_GE(r.misoriented_faces, 1);
   const Vec3 N = deform::area_normal(r.X, tm.boundary(odd, 0), tm.boundary(odd, 1), tm.boundary(odd, 2));
   EXPECT_FALSE(N.x() > 1e-12) << "the odd triangle should not face +X";
+
+  // The state reached, written for inspection (--write-failed): the inverted field marks exactly
+  // the tets the realization counts, the label field the triangles' labels.
+  const std::string path = testing::TempDir() + "failed_polycube.vtk";
+  EXPECT_EQ(write_failed_polycube(path, r.rest, r.X, r.T, tm.boundary, labels), r.inverted);
+  std::ifstream in(path);
+  std::string tok;
+  std::map<std::string, std::vector<int>> field;
+  while (in >> tok)
+    if (tok == "SCALARS") {
+      std::string name, type, lut, def;
+      int ncomp = 0;
+      in >> name >> type >> ncomp >> lut >> def;
+      auto& v = field[name];
+      for (long i = 0; i < tm.boundary.rows() + r.T.rows(); ++i) {
+        int x = 0;
+        in >> x;
+        v.push_back(x);
+      }
+    }
+  ASSERT_EQ(field["inverted"].size(), static_cast<size_t>(tm.boundary.rows() + r.T.rows()));
+  EXPECT_EQ(std::count(field["inverted"].begin(), field["inverted"].end(), 1), r.inverted);
+  for (int f = 0; f < tm.boundary.rows(); ++f) EXPECT_EQ(field["inverted"][f], 0);
+  ASSERT_EQ(field["label"].size(), field["inverted"].size());
+  EXPECT_EQ(field["label"][odd], kPosX);
+  for (int f = 0; f < tm.boundary.rows(); ++f) ASSERT_EQ(field["label"][f], labels[f]) << f;
+  EXPECT_EQ(field["label"].back(), -1);
 }
 
 namespace {

@@ -53,7 +53,8 @@ const std::vector<std::string>& output_files() {
   static const std::vector<std::string> f = {"report.json", "surface.mesh", "surface.vtk", "tetmesh.mesh", "tetmesh.vtk",
                                              "deformed.mesh", "deformed.vtk", "labels.txt", "polycube.mesh",
                                              "polycube.vtk", "polycube_surface.obj", "map.obj", "hex.mesh",
-                                             "hex.vtk", "quad.obj", "quad.mesh", "quad.vtk"};
+                                             "hex.vtk", "quad.obj", "quad.mesh", "quad.vtk",
+                                             "failed_polycube.vtk"};
   return f;
 }
 
@@ -700,8 +701,23 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // (PipelineOptions::hex_through_folds).
       const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
                               chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
-      if (!rr.success && !folded_map)
-        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure);
+      if (!rr.success && !folded_map) {
+        std::string where = " (rerun with --write-failed to get the state reached in OUTDIR/failed_polycube.vtk)";
+        if (opt.write_failed && rr.X.rows() > 0 && rr.T.rows() > 0) {
+          // A diagnosis, not a result: written straight into the output folder under its own name
+          // (the staged outputs are dropped on failure), through a temporary file.
+          const fs::path tmp = out / "failed_polycube.vtk.tmp", dst = out / "failed_polycube.vtk";
+          write_failed_polycube(tmp.string(), rr.rest, rr.X, rr.T, ex.map_triangles(tm.boundary), ex.map_triangle_labels(),
+                                opt.vtk_binary);
+          std::error_code ec;
+          fs::rename(tmp, dst, ec);
+          where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
+                     : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
+        } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
+          where.clear();  // failed before any state: nothing to show
+        }
+        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + where);
+      }
       pj["map_valid"] = rr.success;
       if (folded_map) {
         // Its figures, which the realization leaves unset on failure (over every tet, the inverted
@@ -1120,6 +1136,29 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     }
     throw;
   }
+}
+
+int write_failed_polycube(const std::string& path, const MatX3d& rest, const MatX3d& X, const MatX4i& T,
+                          const MatX3i& F, const std::vector<int>& labels, bool binary) {
+  MeshData m;
+  m.V = X;
+  m.F = F;
+  m.T = T;
+  io::CellFields fields;
+  fields["label"] = labels;
+  fields["label"].resize(F.rows() + T.rows(), -1);
+  fields["inverted"].assign(F.rows() + T.rows(), 0);
+  int inverted = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    // As RealizeResult::inverted: the volume ratio to the rest tet is not positive.
+    const double v = tet_volume(X.row(T(t, 0)), X.row(T(t, 1)), X.row(T(t, 2)), X.row(T(t, 3)));
+    const double r = tet_volume(rest.row(T(t, 0)), rest.row(T(t, 1)), rest.row(T(t, 2)), rest.row(T(t, 3)));
+    const bool bad = !(v / r > 0);
+    fields["inverted"][F.rows() + t] = bad;
+    inverted += bad;
+  }
+  io::write_vtk(path, m, binary, fields);
+  return inverted;
 }
 
 json run_beta_sweep(const PipelineOptions& opt, const std::vector<double>& betas, const Hooks& hooks) {

@@ -55,6 +55,12 @@ struct PipelineOptions {
   /// Hausdorff 4.5e-3 of the diagonal; homer (2 inverted, the state overlapping itself widely) and
   /// octopus-low (its best state crushed) still fail.
   int hex_through_folds = 100;
+  /// Volume mode: when no valid polycube is realized (and no hexes come through a folded map),
+  /// write the state the realization reached to OUTDIR/failed_polycube.vtk for inspection: its
+  /// tets and boundary triangles, cell fields `label` (triangles, -1 on tets) and `inverted` (1 on
+  /// the inverted tets). A diagnosis, not a result: the run still fails (exit code 7), the file is
+  /// named as such and removed by the next run in that folder. Off by default.
+  bool write_failed = false;
   bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
   io::CadOptions cad;
   ValidateOptions validate;
@@ -88,6 +94,13 @@ struct PipelineOptions {
 
 /// Names of every file the pipeline may write into the output folder.
 const std::vector<std::string>& output_files();
+
+/// Writes a failed realization's state (PipelineOptions::write_failed) as a VTK file: tets T over
+/// X and the boundary triangles F, cell fields `label` (one per triangle, -1 on tets) and
+/// `inverted` (1 on tets whose volume ratio to their rest tet is not positive, as
+/// RealizeResult::inverted counts them; 0 elsewhere). Returns the inverted tet count.
+int write_failed_polycube(const std::string& path, const MatX3d& rest, const MatX3d& X, const MatX4i& T,
+                          const MatX3i& F, const std::vector<int>& labels, bool binary = false);
 
 /// Runs the pipeline and returns the report (also written to OUTDIR/report.json).
 /// Throws polycube::Error after writing the error report.
