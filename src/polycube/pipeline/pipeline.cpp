@@ -702,17 +702,24 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
                               chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
       if (!rr.success && !folded_map) {
-        std::string where = " (rerun with --write-failed to get the state reached in OUTDIR/failed_polycube.vtk)";
+        std::string where =
+            " (rerun with --write-failed, PipelineOptions::write_failed, to get the state reached in "
+            "OUTDIR/failed_polycube.vtk)";
         if (opt.write_failed && rr.X.rows() > 0 && rr.T.rows() > 0) {
           // A diagnosis, not a result: written straight into the output folder under its own name
           // (the staged outputs are dropped on failure), through a temporary file.
           const fs::path tmp = out / "failed_polycube.vtk.tmp", dst = out / "failed_polycube.vtk";
-          write_failed_polycube(tmp.string(), rr.rest, rr.X, rr.T, ex.map_triangles(tm.boundary), ex.map_triangle_labels(),
-                                opt.vtk_binary);
           std::error_code ec;
-          fs::rename(tmp, dst, ec);
-          where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
-                     : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
+          try {  // the realization's failure stays the error reported, whatever happens here
+            write_failed_polycube(tmp.string(), rr.rest, rr.X, rr.T, ex.map_triangles(tm.boundary),
+                                  ex.map_triangle_labels(), opt.vtk_binary);
+            fs::rename(tmp, dst, ec);
+            where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
+                       : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
+          } catch (const Error& e) {
+            where = std::string(" (failed_polycube.vtk could not be written: ") + e.what() + ")";
+          }
+          if (ec || where.find("could not") != std::string::npos) fs::remove(tmp, ec);
         } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
           where.clear();  // failed before any state: nothing to show
         }
