@@ -1166,28 +1166,6 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     r.planes[k] = planes.count[k];
     if (planes.count[k] < 2) return fail(std::string("fewer than two planes normal to ") + "XYZ"[k]);
   }
-  {
-    const double diag = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
-    const auto pairs = deform::thickness_pairs(deformed, B, 0.05 * diag, true);
-    int bad = 0, tot = 0;
-    double wbad = 0;
-    std::map<std::pair<int,int>, int> badp;
-    for (const auto& pr : pairs) {
-      const int lf = labels[pr.f], k = lf / 2;
-      const int pf = planes.of_vertex[k][B(pr.f, 0)], pv = planes.of_vertex[k][pr.v];
-      if (pf < 0 || pv < 0 || pf == pv) continue;
-      bool vfaces = false;
-      for (int c : vcharts[pr.v]) vfaces = vfaces || charts.label[c] == (lf ^ 1);
-      if (!vfaces) continue;
-      ++tot;
-      // f faces -k (lf odd): f above v; f faces +k: f below v.
-      const double d = (lf & 1) ? planes.height[k][pf] - planes.height[k][pv] : planes.height[k][pv] - planes.height[k][pf];
-      const double dd = (lf & 1) ? deformed(B(pr.f,0), k) - deformed(pr.v, k) : deformed(pr.v, k) - deformed(B(pr.f,0), k);
-      if (d <= 0) { ++bad; wbad += pr.w; badp[{k * 1000 + pf, k * 1000 + pv}]++;
-        if (badp[{k * 1000 + pf, k * 1000 + pv}] == 1) hooks.debug(std::string("gap order ") + "XYZ"[k] + std::to_string(pf) + " / " + std::to_string(pv) + ": mean heights " + std::to_string(d / diag) + " x diag, deformed " + std::to_string(dd / diag)); }
-    }
-    hooks.debug("gap orders: " + std::to_string(tot) + " exterior pairs across planes, " + std::to_string(bad) + " reversed by the mean heights (" + std::to_string(100 * wbad) + "% of the area), " + std::to_string(badp.size()) + " plane pairs");
-  }
 
   // Inward direction at a vertex made between input vertices `vs`: against the label of every plane
   // they all lie on (zero if none).
