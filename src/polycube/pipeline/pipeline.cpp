@@ -717,9 +717,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
             where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
                        : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
           } catch (const Error& e) {
+            ec = std::make_error_code(std::errc::io_error);
             where = std::string(" (failed_polycube.vtk could not be written: ") + e.what() + ")";
           }
-          if (ec || where.find("could not") != std::string::npos) fs::remove(tmp, ec);
+          if (ec) fs::remove(tmp, ec);
         } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
           where.clear();  // failed before any state: nothing to show
         }
