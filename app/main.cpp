@@ -190,6 +190,13 @@ int main(int argc, char** argv) {
                  "Polycube deformation: per tet, the volume barrier is multiplied by this whenever the full SQP step "
                  "would invert the tet (1 = off)")
       ->capture_default_str()->check(CLI::Range(1.0, 1e3));
+  app.add_option("--crush-guard", d.crush_guard_weight,
+                 "Polycube deformation (volume): weight of the barrier that keeps tets from being pressed under "
+                 "--crush-guard-ratio of their rest volume, each such tet weighing as a tet of mean volume (0 = off)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--crush-guard-ratio", d.crush_guard_ratio,
+                 "Polycube deformation (volume): the volume ratio under which the crush guard acts")
+      ->capture_default_str()->check(CLI::Range(1e-6, 0.9));
   bool plain_hessian = false;
   app.add_flag("--no-lagrangian-hessian", plain_hessian,
                "Polycube deformation: leave the area constraint's curvature out of the SQP Hessian (slower "

@@ -1,5 +1,6 @@
 // Finite-difference checks of every gradient and exact Hessian, PSD checks of the Hessian
 // approximations, and known values, on small meshes built in code.
+#include <algorithm>
 #include <Eigen/Eigenvalues>
 #include <random>
 
@@ -217,8 +218,12 @@ TEST(Energies, GapPairsAcrossTheOutsideBetweenTwoParts) {
   for (int v = 0; v < two.V.rows(); ++v) {
     const bool on_gap = two.V(v, 2) == 1.0 || two.V(v, 2) == 1.04;
     const bool corner = (two.V(v, 0) == 0 || two.V(v, 0) == 1) && (two.V(v, 1) == 0 || two.V(v, 1) == 1);
-    if (on_gap && !corner) EXPECT_TRUE(paired[v]) << two.V.row(v);
-    if (!on_gap) EXPECT_FALSE(paired[v]) << two.V.row(v);
+    if (on_gap && !corner) {
+      EXPECT_TRUE(paired[v]) << two.V.row(v);
+    }
+    if (!on_gap) {
+      EXPECT_FALSE(paired[v]) << two.V.row(v);
+    }
   }
   EXPECT_GE(static_cast<int>(gaps.size()), 2 * (25 - 4));
   for (const ThicknessPair& p : gaps) {
@@ -409,6 +414,42 @@ TEST(Energies, VolumeBarrierPerTetMultipliers) {
   // All multipliers 1 is the plain barrier.
   std::fill(boost.begin(), boost.end(), 1.0);
   EXPECT_NEAR(E(s.X, nullptr, nullptr), volume_barrier_energy(s.X, s.T, rest, 0.3, nullptr, nullptr), 1e-14);
+}
+
+TEST(Energies, CrushGuardActsOnlyUnderItsRatioWithEqualWeights) {
+  Small s = small_mesh();
+  ArapRest rest = ArapRest::build(s.X0, s.T);
+  // A ratio between the smallest and largest J of the test state, so that some tets are under it
+  // and some above (the gradient check then crosses both branches).
+  std::vector<double> J;
+  for (int t = 0; t < s.T.rows(); ++t) {
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = (s.X.row(s.T(t, m + 1)) - s.X.row(s.T(t, 0))).transpose();
+    J.push_back((Ds * rest.Dm_inv[t]).determinant());
+  }
+  std::sort(J.begin(), J.end());
+  ASSERT_GT(J.front(), 0);
+  ASSERT_LT(J.front(), J.back());
+  const double j0 = 0.5 * (J[J.size() / 2] + J[J.size() / 2 - 1]);
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return crush_guard_energy(X, s.T, rest, j0, 0.7, g, H);
+  };
+  expect_gradient(E, s.X);
+  expect_psd(hessian(E, s.X));
+  EXPECT_GT(E(s.X, nullptr, nullptr), 0);
+  // At rest (J = 1 > j0) nothing, gradient included.
+  EXPECT_EQ(crush_guard_energy(s.X0, s.T, rest, 0.5, 0.7, nullptr, nullptr), 0);
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(s.X0.size());
+  crush_guard_energy(s.X0, s.T, rest, 0.5, 0.7, &g, nullptr);
+  EXPECT_EQ(g.cwiseAbs().maxCoeff(), 0);
+  // Scaled by 1/2: J = 1/8 in every tet, r = 1/2 with j0 = 1/4; each tet weighs 1/#tets whatever
+  // its volume, so the sum is psi(1/2) = 1/2 - 1 + log 2.
+  EXPECT_NEAR(crush_guard_energy(0.5 * s.X0, s.T, rest, 0.25, 0.7, nullptr, nullptr),
+              0.7 * (std::log(2.0) - 0.5), 1e-12);
+  // An inverted tet: +inf.
+  MatX3d M = s.X0;
+  M.col(2) *= -1;
+  EXPECT_TRUE(std::isinf(crush_guard_energy(M, s.T, rest, 0.25, 0.7, nullptr, nullptr)));
 }
 
 TEST(Energies, UntangleGradientAlsoOnInvertedTets) {

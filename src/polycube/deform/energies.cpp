@@ -434,6 +434,34 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   return weight * E;
 }
 
+double crush_guard_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double j0, double weight,
+                          Eigen::VectorXd* grad, HessianSink* hess) {
+  if (T.rows() == 0 || !(j0 > 0)) return 0;
+  const double wt = 1.0 / static_cast<double>(T.rows());
+  double E = 0;
+  for (int t = 0; t < T.rows(); ++t) {
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+    const Eigen::Matrix3d Fm = Ds * Di;
+    const double J = Fm.determinant();
+    if (!(J > 0)) return std::numeric_limits<double>::infinity();
+    if (J >= j0) continue;
+    const double r = J / j0;
+    E += wt * (r - 1.0 - std::log(r));
+    if (!grad && !hess) continue;
+    const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
+    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
+    Eigen::Matrix<double, 12, 1> dJ;
+    for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
+    // d psi / dJ = 1/j0 - 1/J; d2 psi / dJ2 = 1/J^2.
+    if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * wt * (1.0 / j0 - 1.0 / J) * dJ));
+    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
+  }
+  return weight * E;
+}
+
 double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRest& rest, double weight,
                            Eigen::VectorXd* grad, HessianSink* hess) {
   double E = 0;

@@ -128,6 +128,13 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
       return e;
     }
   }
+  if (!p.surface && p.opt.crush_guard_weight > 0) {
+    e.volume += crush_guard_energy(X, p.T, p.rest, p.opt.crush_guard_ratio, p.opt.crush_guard_weight, g, H);
+    if (!std::isfinite(e.volume)) {
+      e.total = std::numeric_limits<double>::infinity();
+      return e;
+    }
+  }
   e.arap = p.distortion(X, g, with_arap_hessian ? H : nullptr);
   e.total = e.volume + e.arap;
   return e;

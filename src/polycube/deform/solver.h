@@ -34,6 +34,10 @@ struct DeformOptions {
   /// 0.0844, fandisk 0.0411 -> 0.0404, rod 0.0714 -> 0.0709, rocker see README), more charts on
   /// fandisk (39 -> 43) and a nearly flat tet in spot's realization at 20k tets: kept as an option.
   bool neutral_volume_barrier = false;
+  /// Weight of the crush guard (crush_guard_energy; 0 = off): tets pressed under crush_guard_ratio
+  /// of their rest volume are pushed open with the weight of a tet of mean volume, however small.
+  double crush_guard_weight = 0.0;
+  double crush_guard_ratio = 0.05;
   /// The volume-barrier weight is multiplied by 4 whenever tets about to invert cut a line search
   /// short, up to this value.
   double volume_barrier_max = 0.1;
