@@ -238,6 +238,27 @@ TEST(Cli, UntilDeformWritesDeformedMeshAndConvergenceRecord) {
   EXPECT_EQ(m.T, t.T);
 }
 
+TEST(Cli, CrushGuardOption) {
+  std::string out = temp_dir("crush");
+  RunResult r = run_cli("--example sphere --example-size 0.08 --until deform -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json plain = report(out);
+  EXPECT_EQ(plain["polycube"]["options"]["crush_guard"].get<double>(), 0.0);  // off by default
+  const int crushed = plain["polycube"]["crushed_tets"].get<int>();
+  EXPECT_GE(crushed, 0);
+  EXPECT_LE(crushed, plain["tetmesh"]["tets"].get<int>());
+  r = run_cli("--example sphere --example-size 0.08 --until deform --crush-guard 10 --crush-guard-ratio 0.2 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(out);
+  EXPECT_EQ(j["polycube"]["options"]["crush_guard"].get<double>(), 10.0);
+  EXPECT_EQ(j["polycube"]["options"]["crush_guard_ratio"].get<double>(), 0.2);
+  EXPECT_EQ(j["polycube"]["crushed_tets"].get<int>(), 0);  // none is left under 1e-3 of its volume
+  EXPECT_EQ(j["polycube"]["inverted_tets"].get<int>(), 0);
+  EXPECT_LT(j["polycube"]["l1_quality"].get<double>(), 1e-3);
+  EXPECT_EQ(run_cli("--example sphere --until deform --crush-guard -1 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example sphere --until deform --crush-guard-ratio 1.5 -q -o " + out).code, 2);
+}
+
 TEST(Cli, VolumeBoostOption) {
   std::string out = temp_dir("boost");
   RunResult r = run_cli("--example sphere --example-size 0.08 --until deform --volume-boost 1 -q -o " + out);

@@ -152,6 +152,10 @@ struct DeformResult {
   int factorizations = 0;    ///< sparse Cholesky factorizations made
   double volume_barrier_weight = 0;  ///< final (possibly raised) volume-barrier weight
   int boosted_tets = 0;      ///< tets whose volume barrier was raised (they blocked a full step)
+  /// Volume mode: tets left with under kCrushedRatio of their rest volume (nearly flat; such tets
+  /// can block the realization, see DeformOptions::crush_guard_weight).
+  int crushed_tets = 0;
+  static constexpr double kCrushedRatio = 1e-3;
   /// Vertex pairs kept apart (thickness_energy): across thin parts (surface mode) or gaps (volume).
   int thickness_pairs = 0;
   /// Area fraction of the thin parts (surface mode) or gaps (volume mode) pressed under

@@ -484,6 +484,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"distortion", opt.surface ? "surface_arap" : "volume_arap"},
                  {"volume_barrier_weight", dr.volume_barrier_weight},
                  {"boosted_tets", dr.boosted_tets},
+                 {"crushed_tets", dr.crushed_tets},
                  {"thickness_pairs", dr.thickness_pairs},
                  {"thin_crushed", dr.thin_crushed},
                  {"thin_crushed_after", dr.thin_crushed_after}};
@@ -502,6 +503,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"volume_barrier_form", opt.deform.neutral_volume_barrier ? "neutral" : "log"},
                        {"locality_order", opt.deform.locality_order},
                        {"volume_boost", opt.deform.volume_boost_factor},
+                       {"crush_guard", opt.deform.crush_guard_weight},
+                       {"crush_guard_ratio", opt.deform.crush_guard_ratio},
                        {"thickness", opt.deform.thickness_weight},
                        {"thickness_keep", opt.deform.thickness_keep},
                        {"gap_barrier", opt.deform.gap_weight},
