@@ -104,6 +104,11 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1e-3, 0.5));
   app.add_option("--until", until, "Stop after this stage: load, tet, deform, polycube, then hex or quad")
       ->capture_default_str();
+  app.add_option("--remove-spikes", opt.tet.spike_height,
+                 "Before tetrahedralizing: remove the surface's spikes (vertices with three neighbours) lower than "
+                 "this fraction of the bounding-box diagonal, which the deformation crushes (0 = keep them; the "
+                 "map reaches their vertices by closest point)")
+      ->capture_default_str()->check(CLI::Range(0.0, 0.1));
   app.add_option("--edge-length", opt.tet.edge_length,
                  "Remesh the surface before tetrahedralization to this edge length, fraction of the bbox "
                  "diagonal (0 = keep the input triangles)")

@@ -432,6 +432,40 @@ TEST(Cli, UntilPolycubeWritesLabelsMapAndExactPolycube) {
   EXPECT_NEAR(d1 / d0, 1.0, 0.05);
 }
 
+TEST(Cli, RemoveSpikesFlattensThemAndMapsTheirVertices) {
+  // A sphere with one spike: a vertex 1e-4 of the diagonal above the centroid of triangle 7.
+  SurfaceMesh s = sphere(2);
+  const int f = 7, a = s.F(f, 0), b = s.F(f, 1), c = s.F(f, 2);
+  const Vec3 pa = s.V.row(a), pb = s.V.row(b), pc = s.V.row(c);
+  const double diag = (s.V.colwise().maxCoeff() - s.V.colwise().minCoeff()).norm();
+  const int v = static_cast<int>(s.V.rows());
+  s.V.conservativeResize(v + 1, 3);
+  s.V.row(v) = ((pa + pb + pc) / 3 + 1e-4 * diag * (pb - pa).cross(pc - pa).normalized()).transpose();
+  s.F.row(f) << a, b, v;
+  s.F.conservativeResize(s.F.rows() + 2, 3);
+  s.F.row(s.F.rows() - 2) << b, c, v;
+  s.F.row(s.F.rows() - 1) << c, a, v;
+  std::string dir = temp_dir("spikes");
+  io::write_obj(dir + "/in.obj", s.V, s.F);
+  RunResult r = run_cli(dir + "/in.obj --until polycube --remove-spikes 1e-3 -q -o " + dir + "/out");
+  ASSERT_EQ(r.code, 0) << r.output;
+  json j = report(dir + "/out");
+  EXPECT_EQ(j["tetmesh"]["spikes_removed"].get<int>(), 1);
+  EXPECT_EQ(j["tetmesh"]["boundary_triangles"].get<int>(), s.F.rows() - 2);
+  EXPECT_EQ(j["polycube"]["map_transfer"], "closest_point");
+  EXPECT_LT(j["polycube"]["map_transfer_max_distance"].get<double>(), 2e-4 * diag);
+  MeshData map = io::read_mesh(dir + "/out/map.obj");
+  EXPECT_EQ(map.V.rows(), s.V.rows());  // every input vertex, the spike's included
+  EXPECT_EQ(static_cast<int>(read_labels(dir + "/out/labels.txt").size()), s.F.rows());
+  // Off by default: the spike stays in the tet mesh's boundary.
+  r = run_cli(dir + "/in.obj --until tet -q -o " + dir + "/out0");
+  ASSERT_EQ(r.code, 0) << r.output;
+  j = report(dir + "/out0");
+  EXPECT_EQ(j["tetmesh"]["spikes_removed"].get<int>(), 0);
+  EXPECT_EQ(j["tetmesh"]["boundary_triangles"].get<int>(), s.F.rows());
+  EXPECT_EQ(run_cli(dir + "/in.obj --until tet --remove-spikes -1 -q -o " + dir + "/out0").code, 2);
+}
+
 TEST(Cli, RemeshedSurfaceGetsItsMapByClosestPoints) {
   std::string out = temp_dir("remesh_map");
   RunResult r = run_cli("--example sphere --edge-length 0.05 -q -o " + out);

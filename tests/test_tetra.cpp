@@ -113,3 +113,56 @@ TEST(Tetra, SelfIntersectionNamesFaces) {
     EXPECT_NE(std::string(e.what()).find("faces "), std::string::npos) << e.what();
   }
 }
+
+TEST(Tetra, RemoveSpikesFlattensLowSpikesOnly) {
+  // A box whose face triangle f gets a spike: a vertex above its centroid, joined to its corners
+  // (1-to-3 split), at height h.
+  const SurfaceMesh b = grid_box(3);
+  auto spiked = [&](double h) {
+    SurfaceMesh s = b;
+    const int f = 5, a = s.F(f, 0), c = s.F(f, 1), d = s.F(f, 2);
+    const Vec3 pa = s.V.row(a), pc = s.V.row(c), pd = s.V.row(d);
+    const Vec3 n = (pc - pa).cross(pd - pa).normalized();
+    const int v = static_cast<int>(s.V.rows());
+    s.V.conservativeResize(v + 1, 3);
+    s.V.row(v) = ((pa + pc + pd) / 3 + h * n).transpose();
+    s.F.row(f) << a, c, v;
+    s.F.conservativeResize(s.F.rows() + 2, 3);
+    s.F.row(s.F.rows() - 2) << c, d, v;
+    s.F.row(s.F.rows() - 1) << d, a, v;
+    return s;
+  };
+  // Higher than the limit: kept, and nothing else either (the box's corners are not low).
+  SurfaceMesh high = spiked(0.01);
+  EXPECT_EQ(remove_spikes(high, 0.005), 0);
+  EXPECT_EQ(high.F.rows(), b.F.rows() + 2);
+  // Lower: the three triangles become the face triangle again, the vertex is dropped.
+  SurfaceMesh low = spiked(0.001);
+  EXPECT_EQ(remove_spikes(low, 0.005), 1);
+  ASSERT_EQ(low.V.rows(), b.V.rows());
+  ASSERT_EQ(low.F.rows(), b.F.rows());
+  EXPECT_LE((low.V - b.V).cwiseAbs().maxCoeff(), 0.0);
+  // Same triangles as the box, with their orientation (as sorted rotations of each row).
+  auto canon = [](const MatX3i& F) {
+    std::vector<std::array<int, 3>> r;
+    for (int f = 0; f < F.rows(); ++f) {
+      std::array<int, 3> t{F(f, 0), F(f, 1), F(f, 2)};
+      while (t[0] != std::min({t[0], t[1], t[2]})) std::rotate(t.begin(), t.begin() + 1, t.end());
+      r.push_back(t);
+    }
+    std::sort(r.begin(), r.end());
+    return r;
+  };
+  EXPECT_EQ(canon(low.F), canon(b.F));
+  // The surface is still a valid closed surface and tetrahedralizes.
+  Prepared p = prepare(low);
+  EXPECT_NO_THROW(tetrahedralize(p.s, p.l, {}, Hooks{}));
+  // A tetrahedron is all spikes of itself: nothing to flatten into (its base triangle exists).
+  SurfaceMesh tet;
+  tet.V.resize(4, 3);
+  tet.V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0.001;
+  tet.F.resize(4, 3);
+  tet.F << 0, 2, 1, 0, 1, 3, 1, 2, 3, 0, 3, 2;
+  EXPECT_EQ(remove_spikes(tet, 0.01), 0);
+  EXPECT_EQ(tet.F.rows(), 4);
+}

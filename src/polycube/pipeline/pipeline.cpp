@@ -316,6 +316,19 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         used.V = rm.V;
         used.F = rm.F;
       }
+      int spikes = 0;
+      if (opt.tet.spike_height > 0 && !opt.surface && !have_tets && input_closed) {
+        spikes = remove_spikes(used, opt.tet.spike_height * diag);
+        if (spikes > 0) {
+          hooks.info("removed " + std::to_string(spikes) + " spikes of the surface lower than " +
+                     std::to_string(opt.tet.spike_height) + " x diagonal");
+          MeshData rm = make_mesh_data(used.V, used.F, "despiked");
+          rm.path = "surface without its spikes";
+          validate_surface(rm, used_layout, opt.validate);
+          used.V = rm.V;
+          used.F = rm.F;
+        }
+      }
       if (opt.surface) {
         // Surface mode: no tets; the (possibly remeshed) surface is the mesh that deforms.
         if (el <= 0) {
@@ -338,7 +351,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         tj = tet_json(tm, stats.quality);
         tj["source"] = "gmsh-" + stats.algorithm;
         tj["remeshed"] = el > 0;
-        if (el <= 0) {
+        tj["spikes_removed"] = spikes;
+        if (el <= 0 && spikes == 0) {
           surf_to_tet.resize(surface.V.rows());
           std::iota(surf_to_tet.begin(), surf_to_tet.end(), 0);  // tetrahedralize keeps them first
         }

@@ -7,6 +7,7 @@
 #include <array>
 #include <cmath>
 #include <map>
+#include <set>
 #include <sstream>
 #include <unordered_map>
 
@@ -365,6 +366,81 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
   st.quality = measure_tets(tm.V, tm.T);
   if (stats) *stats = st;
   return tm;
+}
+
+int remove_spikes(SurfaceMesh& s, double max_height_abs) {
+  const int n = static_cast<int>(s.V.rows());
+  std::vector<std::array<int, 3>> F(s.F.rows());
+  for (int f = 0; f < s.F.rows(); ++f) F[f] = {s.F(f, 0), s.F(f, 1), s.F(f, 2)};
+  std::vector<char> alive(F.size(), 1);
+  std::vector<std::vector<int>> faces_of(n);
+  for (int f = 0; f < static_cast<int>(F.size()); ++f)
+    for (int k = 0; k < 3; ++k) faces_of[F[f][k]].push_back(f);
+  std::set<std::array<int, 3>> keys;  // sorted vertex triples of the live triangles
+  auto key = [](std::array<int, 3> t) {
+    std::sort(t.begin(), t.end());
+    return t;
+  };
+  for (const auto& t : F) keys.insert(key(t));
+  int removed = 0;
+  for (bool again = true; again;) {
+    again = false;
+    for (int v = 0; v < n; ++v) {
+      std::vector<int> fs;
+      for (int f : faces_of[v])
+        if (alive[f]) fs.push_back(f);
+      if (fs.size() != 3) continue;
+      // The ring: for each triangle (v, a, b) in its orientation, the edge a -> b.
+      std::map<int, int> next;
+      for (int f : fs) {
+        int k = 0;
+        while (F[f][k] != v) ++k;
+        next[F[f][(k + 1) % 3]] = F[f][(k + 2) % 3];
+      }
+      if (next.size() != 3) continue;
+      const int a = next.begin()->first, b = next[a], c = next[b];
+      if (next[c] != a) continue;  // not one closed ring of three
+      const std::array<int, 3> base{a, b, c};
+      if (keys.count(key(base))) continue;  // the base triangle exists already (a tetrahedron)
+      const Vec3 pa = s.V.row(a), pb = s.V.row(b), pc = s.V.row(c), pv = s.V.row(v);
+      const Vec3 nrm = (pb - pa).cross(pc - pa);
+      if (!(nrm.norm() > 0)) continue;
+      if (!(std::abs(nrm.normalized().dot(pv - pa)) < max_height_abs)) continue;
+      for (int f : fs) {
+        alive[f] = 0;
+        keys.erase(key(F[f]));
+      }
+      alive[fs[0]] = 1;
+      F[fs[0]] = base;
+      keys.insert(key(base));
+      for (int w : base)
+        if (std::find(faces_of[w].begin(), faces_of[w].end(), fs[0]) == faces_of[w].end()) faces_of[w].push_back(fs[0]);
+      faces_of[v].clear();
+      ++removed;
+      again = true;
+    }
+  }
+  if (removed == 0) return 0;
+  std::vector<int> id(n, -1);  // the kept vertices in their order
+  for (int f = 0; f < static_cast<int>(F.size()); ++f)
+    if (alive[f])
+      for (int w : F[f]) id[w] = 0;
+  int m = 0;
+  for (int w = 0; w < n; ++w)
+    if (id[w] == 0) id[w] = m++;
+  MatX3d V(m, 3);
+  for (int w = 0; w < n; ++w)
+    if (id[w] >= 0) V.row(id[w]) = s.V.row(w);
+  const int nf = static_cast<int>(std::count(alive.begin(), alive.end(), 1));
+  MatX3i G(nf, 3);
+  for (int f = 0, r = 0; f < static_cast<int>(F.size()); ++f)
+    if (alive[f]) {
+      for (int k = 0; k < 3; ++k) G(r, k) = id[F[f][k]];
+      ++r;
+    }
+  s.V = std::move(V);
+  s.F = std::move(G);
+  return removed;
 }
 
 }  // namespace polycube

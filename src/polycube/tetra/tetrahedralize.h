@@ -29,6 +29,9 @@ struct TetOptions {
   std::string algorithm = "delaunay";
   /// Run Gmsh's tet optimization (improves dihedral angles, keeps the boundary).
   bool optimize = true;
+  /// > 0: before tetrahedralizing, remove the spikes of the surface lower than this (fraction of
+  /// the bbox diagonal): see remove_spikes. 0: keep them.
+  double spike_height = 0;
 };
 
 struct TetStats {
@@ -50,6 +53,16 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
 /// Remeshes each component of a surface with Gmsh (feature-preserving classification, then
 /// 2D meshing at `edge_length_abs`). The result still needs validate_surface.
 SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, double edge_length_abs);
+
+/// Removes the spikes of a closed surface: vertices with exactly three neighbours whose distance to
+/// the plane of those neighbours is under max_height_abs. Their three triangles become the one
+/// triangle of the neighbours (oriented as they were); repeated while one is found (a removal can
+/// leave a neighbour with three). Such a vertex and its three triangles bound a single tet; when the
+/// l1 deformation flattens the spike into its base that tet (and the four it is split into) is
+/// crushed, and the polycube cannot be realized (homer: a spike 6.4e-4 of the diagonal high).
+/// A removal that would duplicate an existing triangle is skipped. The vertices left without a
+/// triangle are dropped, the others keep their order; returns the number of spikes removed.
+int remove_spikes(SurfaceMesh& s, double max_height_abs);
 
 /// Splits every tet whose four vertices all lie on the boundary by inserting its centroid (four
 /// new tets). Such tets must flatten wherever the boundary around them becomes planar, which would
