@@ -464,6 +464,10 @@ TEST(Cli, RemoveSpikesFlattensThemAndMapsTheirVertices) {
   EXPECT_EQ(j["tetmesh"]["spikes_removed"].get<int>(), 0);
   EXPECT_EQ(j["tetmesh"]["boundary_triangles"].get<int>(), s.F.rows());
   EXPECT_EQ(run_cli(dir + "/in.obj --until tet --remove-spikes -1 -q -o " + dir + "/out0").code, 2);
+  // Where it does not apply it says so.
+  r = run_cli(dir + "/in.obj --surface --until deform --remove-spikes 1e-3 -q -o " + dir + "/out1");
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("--remove-spikes ignored"), std::string::npos) << r.output;
 }
 
 TEST(Cli, RemeshedSurfaceGetsItsMapByClosestPoints) {

@@ -317,6 +317,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         used.F = rm.F;
       }
       int spikes = 0;
+      if (opt.tet.spike_height > 0 && (opt.surface || have_tets || !input_closed))
+        hooks.warn("--remove-spikes ignored: it applies to closed surfaces tetrahedralized here, not to " +
+                   std::string(opt.surface ? "surface mode" : have_tets ? "a tet mesh input" : "open surfaces"));
       if (opt.tet.spike_height > 0 && !opt.surface && !have_tets && input_closed) {
         spikes = remove_spikes(used, opt.tet.spike_height * diag);
         if (spikes > 0) {
