@@ -401,6 +401,30 @@ std::vector<std::array<int, 2>> border_edges(const MatX3i& F) {
   return out;
 }
 
+// The volume ratio J = det F of one tet (v its vertices, Di its inverse rest edge matrix) and, on
+// demand, its gradient over the tet's 12 coordinates: dJ/dF = cof(F) = J F^-T, dF/dx_p = row p of
+// B as in arap_energy. Shared by the volume barrier and the crush guard.
+namespace {
+struct TetVolume {
+  const Eigen::Matrix3d& Di;
+  Eigen::Matrix3d Fm;
+  double J;
+  TetVolume(const MatX3d& X, const int (&v)[4], const Eigen::Matrix3d& Dinv) : Di(Dinv) {
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    Fm = Ds * Di;
+    J = Fm.determinant();
+  }
+  Eigen::Matrix<double, 12, 1> gradient() const {
+    const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
+    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
+    Eigen::Matrix<double, 12, 1> dJ;
+    for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
+    return dJ;
+  }
+};
+}  // namespace
+
 double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight,
                              Eigen::VectorXd* grad, HessianSink* hess, const std::vector<double>* boost, bool neutral) {
   POLYCUBE_ASSERT(!boost || boost->size() == static_cast<size_t>(T.rows()), "one barrier multiplier per tet");
@@ -408,22 +432,15 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
   for (int t = 0; t < T.rows(); ++t) {
     const double wt = boost ? rest.w[t] * (*boost)[t] : rest.w[t];
     const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-    Eigen::Matrix3d Ds;
-    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-    const Eigen::Matrix3d Fm = Ds * Di;
-    const double J = Fm.determinant();
+    const TetVolume tv(X, v, rest.Dm_inv[t]);
+    const double J = tv.J;
     if (!(J > 0)) return std::numeric_limits<double>::infinity();
     if (neutral)
       E += wt * (J - 1.0 - std::log(J));
     else
       E -= wt * std::log(J);
     if (!grad && !hess) continue;
-    // dJ/dF = cof(F) = J F^-T; dF/dx_p = (row p of B) as in arap_energy.
-    const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
-    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
-    Eigen::Matrix<double, 12, 1> dJ;
-    for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
+    const Eigen::Matrix<double, 12, 1> dJ = tv.gradient();
     if (grad) {
       // phi'(J) times the weights (the -log J form in its original order of operations).
       const double dphi = neutral ? weight * wt * (1.0 - 1.0 / J) : -weight * wt / J;
@@ -441,20 +458,14 @@ double crush_guard_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest
   double E = 0;
   for (int t = 0; t < T.rows(); ++t) {
     const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-    Eigen::Matrix3d Ds;
-    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-    const Eigen::Matrix3d Fm = Ds * Di;
-    const double J = Fm.determinant();
+    const TetVolume tv(X, v, rest.Dm_inv[t]);
+    const double J = tv.J;
     if (!(J > 0)) return std::numeric_limits<double>::infinity();
     if (J >= j0) continue;
     const double r = J / j0;
     E += wt * (r - 1.0 - std::log(r));
     if (!grad && !hess) continue;
-    const Eigen::Matrix3d dJdF = J * Fm.inverse().transpose();
-    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
-    Eigen::Matrix<double, 12, 1> dJ;
-    for (int p = 0; p < 4; ++p) dJ.segment<3>(3 * p) = dJdF * B.row(p).transpose();
+    const Eigen::Matrix<double, 12, 1> dJ = tv.gradient();
     // d psi / dJ = 1/j0 - 1/J; d2 psi / dJ2 = 1/J^2.
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * wt * (1.0 / j0 - 1.0 / J) * dJ));
     if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));

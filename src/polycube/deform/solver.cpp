@@ -10,6 +10,7 @@
 
 #include "polycube/core/error.h"
 #include "polycube/core/parallel.h"
+#include "polycube/deform/untangle.h"
 #include "polycube/deform/sparse_system.h"
 #include "polycube/validate/tetmesh.h"
 
@@ -542,11 +543,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.volume_barrier_weight = p.volume_weight;
   res.boosted_tets = static_cast<int>(std::count_if(p.boost.begin(), p.boost.end(), [](double b) { return b > 1; }));
   if (!p.surface)
-    for (int t = 0; t < p.T.rows(); ++t) {
-      Eigen::Matrix3d Ds;
-      for (int m = 0; m < 3; ++m) Ds.col(m) = (X.row(p.T(t, m + 1)) - X.row(p.T(t, 0))).transpose();
-      if ((Ds * p.rest.Dm_inv[t]).determinant() < DeformResult::kCrushedRatio) ++res.crushed_tets;
-    }
+    for (int t = 0; t < p.T.rows(); ++t) res.crushed_tets += volume_ratio(X, p.T, p.rest, t) < DeformResult::kCrushedRatio;
   return res;
 }
 
