@@ -411,6 +411,36 @@ TEST(Realize, OppositeChartsSharingAPlaneFailWithAReason) {
   EXPECT_NE(r.failure.find("zero thickness"), std::string::npos) << r.failure;
 }
 
+TEST(Realize, EdgeVerticesPastACornerAreCounted) {
+  // A box's polycube edges as the deformed mesh has them: in order on the box itself; one vertex
+  // of the edge along x at y = z = 0 moved past the corner at the origin (x < 0) is counted, as
+  // out of order and past a corner, and named (the realization must move it back past the corner).
+  auto b = grid_box(4);
+  TetMesh tm = tet_mesh_of(b.V, b.F);
+  const auto labels = chart::label_by_normal(tm.V, tm.boundary);
+  const auto r0 = chart::realize_polycube(tm.V, tm.T, tm.boundary, tm.V, labels);
+  EXPECT_TRUE(r0.success) << r0.failure;
+  EXPECT_GE(r0.edge_order_vertices, 12 * 3);
+  EXPECT_EQ(r0.edge_order_violations, 0);
+  EXPECT_EQ(r0.edge_order_past_corner, 0);
+  int v = -1, corner = -1;
+  for (int i = 0; i < tm.V.rows(); ++i) {
+    const Vec3 p = tm.V.row(i).transpose();
+    if (p.norm() < 1e-12) corner = i;
+    if (std::abs(p.x() - 0.25) < 1e-12 && std::abs(p.y()) < 1e-12 && std::abs(p.z()) < 1e-12) v = i;
+  }
+  ASSERT_GE(v, 0);
+  ASSERT_GE(corner, 0);
+  MatX3d D = tm.V;
+  D(v, 0) = -0.05;
+  const auto r = chart::realize_polycube(tm.V, tm.T, tm.boundary, D, labels);
+  EXPECT_EQ(r.edge_order_vertices, r0.edge_order_vertices);
+  EXPECT_GE(r.edge_order_violations, 1);
+  EXPECT_EQ(r.edge_order_past_corner, 1);
+  EXPECT_EQ(r.edge_order_example,
+            "vertex " + std::to_string(v) + " past corner " + std::to_string(corner) + " along X");
+}
+
 TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {
   // One triangle inside the top face labelled +X (no cleanup): its three vertices would share x
   // and z, so the triangle and its tet collapse onto a line and no start untangles them. The

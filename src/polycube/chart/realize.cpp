@@ -1077,32 +1077,20 @@ void open_split_vertices(const MatX3d& rest, MatX3d& def, const MatX4i& T, int f
     def.row(m) = start + best_f * len[i] * dir;
   }
 }
-}  // namespace
 
-RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
-                               const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
-  if (T_in.rows() == 0) return realize_surface_polycube(rest_in, B, deformed, labels, opt, hooks);
-  Stopwatch sw;
-  RealizeResult r;
-  auto fail = [&](const std::string& why) {
-    r.success = false;
-    r.failure = why;
-    r.seconds = sw.seconds();
-    return r;
-  };
-  hooks.report("polycube", 0.0);
-  int n = static_cast<int>(rest_in.rows());
-
-  // ---- planes ----
-  const Charts charts = build_charts(deformed, B, labels);
-  std::vector<std::vector<int>> vcharts(n);
+// The planes of a labelling (charts of one axis that touch form a plane; its height the mean
+// deformed coordinate of its vertices). Returns why there are none ("" when made).
+// charts / vcharts: the labelling's charts, and per vertex the charts around it.
+std::string make_planes(const MatX3d& deformed, const MatX3i& B, const std::vector<int>& labels, int n, Planes& planes,
+                        const Hooks& hooks, Charts& charts, std::vector<std::vector<int>>& vcharts) {
+  charts = build_charts(deformed, B, labels);
+  vcharts.assign(n, {});
   for (int f = 0; f < B.rows(); ++f)
     for (int j = 0; j < 3; ++j) {
       auto& l = vcharts[B(f, j)];
       const int c = charts.of_face[f];
       if (std::find(l.begin(), l.end(), c) == l.end()) l.push_back(c);
     }
-  Planes planes;
   for (int k = 0; k < 3; ++k) {
     UnionFind uf(charts.count());
     for (int v = 0; v < n; ++v) {
@@ -1127,10 +1115,10 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
           for (int a : vcharts[v])
             for (int b : vcharts[v])
               if (charts.label[a] / 2 == k && charts.label[b] == (charts.label[a] ^ 1) && uf.find(a) == root)
-                return fail("charts " + std::to_string(a) + " (" + label_name(charts.label[a]) + ") and " +
-                            std::to_string(b) + " (" + label_name(charts.label[b]) + ") meet at vertex " +
-                            std::to_string(v) + ": the polycube would have zero thickness there");
-        return fail(std::string("opposite charts of axis ") + "XYZ"[k] + " share a plane");
+                return "charts " + std::to_string(a) + " (" + label_name(charts.label[a]) + ") and " +
+                       std::to_string(b) + " (" + label_name(charts.label[b]) + ") meet at vertex " +
+                       std::to_string(v) + ": the polycube would have zero thickness there";
+        return std::string("opposite charts of axis ") + "XYZ"[k] + " share a plane";
       }
       id[c] = id[root];
     }
@@ -1163,9 +1151,132 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
           hooks.debug(std::string("plane ") + "XYZ"[k] + std::to_string(p) + " at " + std::to_string(planes.height[k][p]) +
                       ": deformed vertices up to " + std::to_string(spread[p] / diag) + " x diag away");
     }
-    r.planes[k] = planes.count[k];
-    if (planes.count[k] < 2) return fail(std::string("fewer than two planes normal to ") + "XYZ"[k]);
+    if (planes.count[k] < 2) return std::string("fewer than two planes normal to ") + "XYZ"[k];
   }
+
+  return "";
+}
+
+// The paths of vertices along the polycube's edges: a boundary vertex on two planes (axes i, j)
+// lies on an edge along the third axis k, between two corners (on the same two planes and one of
+// axis k), linked by boundary edges. Calls f(k, c0, path, c1) for each simple path.
+template <class F>
+void for_each_edge_path(const MatX3i& B, const Planes& planes, int n, F&& f) {
+  auto on = [&](int v) {
+    int c = 0;
+    for (int k = 0; k < 3; ++k) c += planes.of_vertex[k][v] >= 0;
+    return c;
+  };
+  auto free_axis = [&](int v) {
+    for (int k = 0; k < 3; ++k)
+      if (planes.of_vertex[k][v] < 0) return k;
+    return -1;
+  };
+  // Neighbours of each edge vertex on its line (the same planes of the two other axes).
+  std::vector<std::vector<int>> nb(n);
+  auto link = [&](int v, int u) {
+    if (on(v) != 2 || on(u) < 2) return;
+    const int k = free_axis(v);
+    for (int a = 0; a < 3; ++a)
+      if (a != k && planes.of_vertex[a][u] != planes.of_vertex[a][v]) return;
+    if (on(u) == 2 && free_axis(u) != k) return;
+    if (std::find(nb[v].begin(), nb[v].end(), u) == nb[v].end()) nb[v].push_back(u);
+  };
+  for (int t = 0; t < B.rows(); ++t)
+    for (int a = 0; a < 3; ++a) {
+      link(B(t, a), B(t, (a + 1) % 3));
+      link(B(t, (a + 1) % 3), B(t, a));
+    }
+  std::vector<char> seen(n, 0);
+  for (int s = 0; s < n; ++s) {
+    if (seen[s] || on(s) != 2) continue;
+    std::vector<int> comp{s}, corners;
+    seen[s] = 1;
+    bool simple = true;
+    for (size_t q = 0; q < comp.size(); ++q) {
+      const int v = comp[q];
+      if (nb[v].size() != 2) simple = false;
+      for (int u : nb[v]) {
+        if (on(u) == 3) {
+          if (std::find(corners.begin(), corners.end(), u) == corners.end()) corners.push_back(u);
+        } else if (!seen[u]) {
+          seen[u] = 1;
+          comp.push_back(u);
+        }
+      }
+    }
+    if (!simple || corners.size() != 2) continue;
+    const int c0 = corners[0], c1 = corners[1];
+    std::vector<int> path;
+    int prev = c0, cur = -1;
+    for (int v : comp)
+      if (std::find(nb[v].begin(), nb[v].end(), c0) != nb[v].end()) {
+        if (cur >= 0) simple = false;
+        cur = v;
+      }
+    while (simple && cur >= 0 && on(cur) == 2 && path.size() <= comp.size()) {
+      path.push_back(cur);
+      const int next = nb[cur][0] == prev ? nb[cur][1] : nb[cur][0];
+      prev = cur;
+      cur = next;
+    }
+    if (simple && cur == c1 && path.size() == comp.size()) f(free_axis(s), c0, path, c1);
+  }
+}
+
+// Vertices of the polycube's edges that the deformed mesh has out of order (see
+// RealizeResult::edge_order_vertices): per simple path c0 -> c1 along axis k, the sequence of the
+// corners' plane heights and the path's deformed k coordinates must be strictly monotone.
+void check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& deformed, RealizeResult& r) {
+  const int n = static_cast<int>(deformed.rows());
+  for_each_edge_path(B, planes, n, [&](int k, int c0, const std::vector<int>& path, int c1) {
+    const double h0 = planes.height[k][planes.of_vertex[k][c0]], h1 = planes.height[k][planes.of_vertex[k][c1]];
+    r.edge_order_vertices += static_cast<int>(path.size());
+    const double sgn = h1 > h0 ? 1 : -1;
+    const int m = static_cast<int>(path.size());
+    for (int i = 0; i < m; ++i) {
+      const double prev = i == 0 ? h0 : deformed(path[i - 1], k), next = i == m - 1 ? h1 : deformed(path[i + 1], k);
+      const double z = deformed(path[i], k);
+      if (sgn * (z - prev) > 0 && sgn * (next - z) > 0) continue;
+      ++r.edge_order_violations;
+      const bool past0 = !(sgn * (z - h0) > 0), past1 = !(sgn * (h1 - z) > 0);
+      if (past0 || past1) ++r.edge_order_past_corner;
+      if (r.edge_order_example.empty() && (past0 || past1))
+        r.edge_order_example = "vertex " + std::to_string(path[i]) + " past corner " + std::to_string(past0 ? c0 : c1) +
+                               " along " + "XYZ"[k];
+    }
+  });
+}
+
+}  // namespace
+
+RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
+                               const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
+  if (T_in.rows() == 0) return realize_surface_polycube(rest_in, B, deformed, labels, opt, hooks);
+  Stopwatch sw;
+  RealizeResult r;
+  auto fail = [&](const std::string& why) {
+    r.success = false;
+    r.failure = why;
+    r.seconds = sw.seconds();
+    return r;
+  };
+  hooks.report("polycube", 0.0);
+  int n = static_cast<int>(rest_in.rows());
+
+  // ---- planes ----
+  Planes planes;
+  Charts charts;
+  std::vector<std::vector<int>> vcharts;
+  if (const std::string why = make_planes(deformed, B, labels, n, planes, hooks, charts, vcharts); !why.empty())
+    return fail(why);
+  for (int k = 0; k < 3; ++k) r.planes[k] = planes.count[k];
+  check_edge_order(B, planes, deformed, r);
+  if (r.edge_order_violations > 0)
+    hooks.debug(std::to_string(r.edge_order_violations) + " of the " + std::to_string(r.edge_order_vertices) +
+                " vertices of polycube edges are out of order along their edge in the deformed mesh, " +
+                std::to_string(r.edge_order_past_corner) + " past a corner's plane" +
+                (r.edge_order_example.empty() ? std::string() : " (e.g. " + r.edge_order_example + ")"));
 
   // Inward direction at a vertex made between input vertices `vs`: against the label of every plane
   // they all lie on (zero if none).

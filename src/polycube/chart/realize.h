@@ -161,6 +161,14 @@ struct RealizeResult {
   int misoriented_faces = 0;     ///< boundary triangles not facing their label's direction (or of zero area)
   int planes[3] = {0, 0, 0};     ///< distinct planes per axis (surface mode: with the border segments' lines)
   int degenerate_border_edges = 0;  ///< surface mode, open surfaces: border edges of zero length
+  /// Tet mode: vertices of the polycube's edges (on two planes, on a path of such vertices between
+  /// two corners), those whose deformed coordinate along the edge is out of order on that path
+  /// (not strictly between its neighbours', the corners counted at their plane heights), and those
+  /// of them past a corner's plane. The realization must move such a vertex back into order while
+  /// the planes pull the edge onto one line, which flattens the tets between it and its neighbour:
+  /// every boundary edge homer's failed realizations collapsed was one (see README).
+  int edge_order_vertices = 0, edge_order_violations = 0, edge_order_past_corner = 0;
+  std::string edge_order_example;  ///< the first one past a corner ("vertex V past corner C along Z")
   double seconds = 0;
 };
 

@@ -763,6 +763,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
+      if (!opt.surface)
+        pj["edge_order"] = {{"vertices", ex.edge_order_vertices},
+                            {"out_of_order", ex.edge_order_violations},
+                            {"past_corner", ex.edge_order_past_corner}};
       if (opt.surface) pj["edge_flips"] = ex.edge_flips;
       pj["edge_collapses"] = ex.edge_collapses;
       pj["collapse_edge_splits"] = ex.collapse_edge_splits;
