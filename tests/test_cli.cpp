@@ -67,6 +67,11 @@ TEST_P(CliExample, RunsToAnExactPolycubeAndAValidHexMesh) {
   EXPECT_EQ(j["polycube"]["misoriented_faces"], 0);
   EXPECT_TRUE(j["polycube"]["chart_graph"]["valid"].get<bool>()) << j["polycube"]["chart_graph"].dump();
   EXPECT_EQ(j["polycube"]["self_overlap_lines"], json::array({0, 0, 0}));
+  // The deformed mesh checked against the polycube's edges (counts only).
+  const json& order = j["polycube"]["edge_order"];
+  EXPECT_GT(order["vertices"].get<int>(), 0);
+  EXPECT_LE(order["out_of_order"].get<int>(), order["vertices"].get<int>());
+  EXPECT_LE(order["past_corner"].get<int>(), order["out_of_order"].get<int>());
   // ... and a hex mesh with no inverted hex, close to the input, that reads back as written.
   const json& h = j["hex"];
   EXPECT_EQ(h["inverted"], 0);

@@ -165,8 +165,9 @@ struct RealizeResult {
   /// two corners), those whose deformed coordinate along the edge is out of order on that path
   /// (not strictly between its neighbours', the corners counted at their plane heights), and those
   /// of them past a corner's plane. The realization must move such a vertex back into order while
-  /// the planes pull the edge onto one line, which flattens the tets between it and its neighbour:
-  /// every boundary edge homer's failed realizations collapsed was one (see README).
+  /// the planes pull the edge onto one line, which flattens the tets between it and its neighbour
+  /// (homer: 4 of the 9 boundary edges its failed realization collapsed have an end among them;
+  /// see README).
   int edge_order_vertices = 0, edge_order_violations = 0, edge_order_past_corner = 0;
   std::string edge_order_example;  ///< the first one past a corner ("vertex V past corner C along Z")
   double seconds = 0;
