@@ -84,6 +84,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   e.edge_order_vertices = e.realized.edge_order_vertices;
   e.edge_order_violations = e.realized.edge_order_violations;
   e.edge_order_past_corner = e.realized.edge_order_past_corner;
+  e.edge_order_example = e.realized.edge_order_example;
   // Kept for the second pass of retries, which only the warm retries can call for.
   std::optional<RealizeResult> first_realization;
   if (opt.warm_retries) first_realization = e.realized;

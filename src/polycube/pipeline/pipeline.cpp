@@ -744,7 +744,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
           where.clear();  // failed before any state: nothing to show
         }
-        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + where);
+        // Vertices of polycube edges past a corner (see RealizeResult::edge_order_*): where chart
+        // borders run on past their corners, which the realization cannot undo without flattening tets.
+        const std::string order =
+            ex.edge_order_past_corner > 0
+                ? "; the deformed mesh has " + std::to_string(ex.edge_order_past_corner) +
+                      " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order_example +
+                      "), where chart borders run on past their corners"
+                : std::string();
+        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where);
       }
       pj["map_valid"] = rr.success;
       if (folded_map) {
