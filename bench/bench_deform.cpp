@@ -186,10 +186,11 @@ int main(int argc, char** argv) {
     return 0;
   }
   std::printf("| model | tets | beta | iterations | alpha steps | factorizations | deform s (median of %d) | l1_quality | "
-              "ARAP deformed | charts | corners | graph valid | polycube ARAP | iso max | inverted | polycube s | "
+              "ARAP deformed | charts | corners | graph valid | polycube ARAP | iso max | inverted | "
+              "edge order: out / past corner | edge collapses | polycube s | "
               "paper: tets | iterations | minutes | ARAP | corners |\n",
               runs);
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   for (const Model& m : models) {
     if (!only.empty() && std::find(only.begin(), only.end(), fs::path(m.file).filename().string()) == only.end()) continue;
     try {
@@ -250,7 +251,7 @@ int main(int argc, char** argv) {
         io::write_medit((dir / "deformed.mesh").string(), out);
       }
       if (deform_only) {
-        std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | | | | | | %d | | %s | %s | %s | %s | %s |\n",
+        std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | | | | | | %d | | | | %s | %s | %s | %s | %s |\n",
                     m.file.c_str(), (long)tm.T.rows(), dopt.beta, r.iterations, r.alpha_steps, r.factorizations,
                     secs[secs.size() / 2], r.l1_quality, r.arap, r.inverted, p1.c_str(), p2.c_str(), p3.c_str(),
                     p4.c_str(), p5.c_str());
@@ -262,11 +263,12 @@ int main(int argc, char** argv) {
       const double extraction_seconds = extraction_clock.seconds();
       const auto& rr = e.realized;
       const std::string arap = rr.success ? std::to_string(rr.arap).substr(0, 6) : "failed";
-      std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | %d | %d | %s | %s | %.1f | %d | %.2f | %s | %s | %s | %s | %s |\n",
+      std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | %d | %d | %s | %s | %.1f | %d | %d / %d | %d | %.2f | %s | %s | %s | %s | %s |\n",
                   m.file.c_str(), (long)tm.T.rows(), dopt.beta, r.iterations, r.alpha_steps, r.factorizations,
                   secs[secs.size() / 2], r.l1_quality, r.arap, e.charts.charts, e.charts.corners,
-                  e.charts.valid ? "yes" : "no", arap.c_str(), rr.isometric.max, r.inverted, extraction_seconds, p1.c_str(),
-                  p2.c_str(), p3.c_str(), p4.c_str(), p5.c_str());
+                  e.charts.valid ? "yes" : "no", arap.c_str(), rr.isometric.max, r.inverted, e.edge_order_violations,
+                  e.edge_order_past_corner, e.edge_collapses, extraction_seconds, p1.c_str(), p2.c_str(), p3.c_str(),
+                  p4.c_str(), p5.c_str());
       if (!rr.success) std::printf("|  | realization failed: %s |\n", rr.failure.c_str());
       std::fflush(stdout);
       // As the CLI's --hex-through-folds (100): a failed realization whose best state is on its
