@@ -266,8 +266,8 @@ int main(int argc, char** argv) {
       std::printf("| %s | %ld | %g | %d | %d | %d | %.2f | %.2e | %.4f | %d | %d | %s | %s | %.1f | %d | %d / %d | %d | %.2f | %s | %s | %s | %s | %s |\n",
                   m.file.c_str(), (long)tm.T.rows(), dopt.beta, r.iterations, r.alpha_steps, r.factorizations,
                   secs[secs.size() / 2], r.l1_quality, r.arap, e.charts.charts, e.charts.corners,
-                  e.charts.valid ? "yes" : "no", arap.c_str(), rr.isometric.max, r.inverted, e.edge_order_violations,
-                  e.edge_order_past_corner, e.edge_collapses, extraction_seconds, p1.c_str(), p2.c_str(), p3.c_str(),
+                  e.charts.valid ? "yes" : "no", arap.c_str(), rr.isometric.max, r.inverted, e.edge_order.out_of_order,
+                  e.edge_order.past_corner, e.edge_collapses, extraction_seconds, p1.c_str(), p2.c_str(), p3.c_str(),
                   p4.c_str(), p5.c_str());
       if (!rr.success) std::printf("|  | realization failed: %s |\n", rr.failure.c_str());
       std::fflush(stdout);

@@ -420,9 +420,9 @@ TEST(Realize, EdgeVerticesPastACornerAreCounted) {
   const auto labels = chart::label_by_normal(tm.V, tm.boundary);
   const auto r0 = chart::realize_polycube(tm.V, tm.T, tm.boundary, tm.V, labels);
   EXPECT_TRUE(r0.success) << r0.failure;
-  EXPECT_GE(r0.edge_order_vertices, 12 * 3);
-  EXPECT_EQ(r0.edge_order_violations, 0);
-  EXPECT_EQ(r0.edge_order_past_corner, 0);
+  EXPECT_GE(r0.edge_order.vertices, 12 * 3);
+  EXPECT_EQ(r0.edge_order.out_of_order, 0);
+  EXPECT_EQ(r0.edge_order.past_corner, 0);
   int v = -1, corner = -1;
   for (int i = 0; i < tm.V.rows(); ++i) {
     const Vec3 p = tm.V.row(i).transpose();
@@ -434,10 +434,10 @@ TEST(Realize, EdgeVerticesPastACornerAreCounted) {
   MatX3d D = tm.V;
   D(v, 0) = -0.05;
   const auto r = chart::realize_polycube(tm.V, tm.T, tm.boundary, D, labels);
-  EXPECT_EQ(r.edge_order_vertices, r0.edge_order_vertices);
-  EXPECT_GE(r.edge_order_violations, 1);
-  EXPECT_EQ(r.edge_order_past_corner, 1);
-  EXPECT_EQ(r.edge_order_example,
+  EXPECT_EQ(r.edge_order.vertices, r0.edge_order.vertices);
+  EXPECT_GE(r.edge_order.out_of_order, 1);
+  EXPECT_EQ(r.edge_order.past_corner, 1);
+  EXPECT_EQ(r.edge_order.example,
             "vertex " + std::to_string(v) + " past corner " + std::to_string(corner) + " along X");
 }
 

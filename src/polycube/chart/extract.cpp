@@ -81,10 +81,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   } else {
     e.realized = realize_polycube(rest, T, B, deformed, e.labels, opt.realize, hooks);
   }
-  e.edge_order_vertices = e.realized.edge_order_vertices;
-  e.edge_order_violations = e.realized.edge_order_violations;
-  e.edge_order_past_corner = e.realized.edge_order_past_corner;
-  e.edge_order_example = e.realized.edge_order_example;
+  e.edge_order = e.realized.edge_order;
   // Kept for the second pass of retries, which only the warm retries can call for.
   std::optional<RealizeResult> first_realization;
   if (opt.warm_retries) first_realization = e.realized;

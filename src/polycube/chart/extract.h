@@ -85,9 +85,8 @@ struct PolycubeExtraction {
   /// (split_edges_for_collapse); their vertices come after the input's in realized.rest / X.
   int collapse_edge_splits = 0;
   /// Tet mode: the first realization's check of the deformed mesh against the labelling's polycube
-  /// edges (RealizeResult::edge_order_*): vertices on the edges, out of order, past a corner.
-  int edge_order_vertices = 0, edge_order_violations = 0, edge_order_past_corner = 0;
-  std::string edge_order_example;  ///< one past a corner ("vertex V past corner C along Z"), if any
+  /// edges (EdgeOrder, as RealizeResult::edge_order): kept from the first realization.
+  EdgeOrder edge_order;
   /// The map's triangles and their labels: map_B / map_labels when repaired, else B / labels.
   const MatX3i& map_triangles(const MatX3i& B) const { return map_B.rows() > 0 ? map_B : B; }
   const std::vector<int>& map_triangle_labels() const { return map_B.rows() > 0 ? map_labels : labels; }

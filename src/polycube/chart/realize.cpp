@@ -1224,28 +1224,31 @@ void for_each_edge_path(const MatX3i& B, const Planes& planes, int n, F&& f) {
   }
 }
 
-// Vertices of the polycube's edges that the deformed mesh has out of order (see
-// RealizeResult::edge_order_vertices): per simple path c0 -> c1 along axis k, the sequence of the
-// corners' plane heights and the path's deformed k coordinates must be strictly monotone.
-void check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& deformed, RealizeResult& r) {
+// The deformed mesh against the polycube's edges (see EdgeOrder): per simple path c0 -> c1 along
+// axis k, the sequence of the corners' plane heights and the path's deformed k coordinates must be
+// strictly monotone.
+EdgeOrder check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& deformed) {
   const int n = static_cast<int>(deformed.rows());
+  EdgeOrder r;
   for_each_edge_path(B, planes, n, [&](int k, int c0, const std::vector<int>& path, int c1) {
     const double h0 = planes.height[k][planes.of_vertex[k][c0]], h1 = planes.height[k][planes.of_vertex[k][c1]];
-    r.edge_order_vertices += static_cast<int>(path.size());
+    r.vertices += static_cast<int>(path.size());
     const double sgn = h1 > h0 ? 1 : -1;
     const int m = static_cast<int>(path.size());
     for (int i = 0; i < m; ++i) {
       const double prev = i == 0 ? h0 : deformed(path[i - 1], k), next = i == m - 1 ? h1 : deformed(path[i + 1], k);
       const double z = deformed(path[i], k);
       if (sgn * (z - prev) > 0 && sgn * (next - z) > 0) continue;
-      ++r.edge_order_violations;
+      ++r.out_of_order;
       const bool past0 = !(sgn * (z - h0) > 0), past1 = !(sgn * (h1 - z) > 0);
-      if (past0 || past1) ++r.edge_order_past_corner;
-      if (r.edge_order_example.empty() && (past0 || past1))
-        r.edge_order_example = "vertex " + std::to_string(path[i]) + " past corner " + std::to_string(past0 ? c0 : c1) +
-                               " along " + "XYZ"[k];
+      if (!past0 && !past1) continue;
+      ++r.past_corner;
+      if (r.example.empty())
+        r.example = "vertex " + std::to_string(path[i]) + " past corner " + std::to_string(past0 ? c0 : c1) +
+                    " along " + "XYZ"[k];
     }
   });
+  return r;
 }
 
 }  // namespace
@@ -1271,12 +1274,13 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   if (const std::string why = make_planes(deformed, B, labels, n, planes, hooks, charts, vcharts); !why.empty())
     return fail(why);
   for (int k = 0; k < 3; ++k) r.planes[k] = planes.count[k];
-  check_edge_order(B, planes, deformed, r);
-  if (r.edge_order_violations > 0)
-    hooks.debug(std::to_string(r.edge_order_violations) + " of the " + std::to_string(r.edge_order_vertices) +
+  r.edge_order = check_edge_order(B, planes, deformed);
+  const EdgeOrder& eo = r.edge_order;
+  if (eo.out_of_order > 0)
+    hooks.debug(std::to_string(eo.out_of_order) + " of the " + std::to_string(eo.vertices) +
                 " vertices of polycube edges are out of order along their edge in the deformed mesh, " +
-                std::to_string(r.edge_order_past_corner) + " past a corner's plane" +
-                (r.edge_order_example.empty() ? std::string() : " (e.g. " + r.edge_order_example + ")"));
+                std::to_string(eo.past_corner) + " past a corner's plane" +
+                (eo.example.empty() ? std::string() : " (e.g. " + eo.example + ")"));
 
   // Inward direction at a vertex made between input vertices `vs`: against the label of every plane
   // they all lie on (zero if none).

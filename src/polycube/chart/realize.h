@@ -132,6 +132,19 @@ struct RealizeOptions {
   double barrier_threshold = 0.3;
 };
 
+/// Tet mode: the deformed mesh checked against the labelling's polycube edges. A boundary vertex on
+/// two planes lies on a polycube edge, on a path of such vertices between two corners; `vertices`
+/// counts them, `out_of_order` those whose deformed coordinate along the edge is not strictly
+/// between its neighbours' on that path (the corners counted at their plane heights), `past_corner`
+/// those of them past a corner's plane. The realization must move such a vertex back into order
+/// while the planes pull the edge onto one line, which flattens the tets between it and its
+/// neighbour (homer: 4 of the 9 boundary edges its failed realization collapsed have an end among
+/// them; see README).
+struct EdgeOrder {
+  int vertices = 0, out_of_order = 0, past_corner = 0;
+  std::string example;  ///< the first one past a corner ("vertex V past corner C along Z")
+};
+
 /// Isometric distortion max(s1, 1/s3) of the map from the rest tets to the polycube tets.
 struct Distortion {
   double min = 0, mean = 0, max = 0;
@@ -161,15 +174,7 @@ struct RealizeResult {
   int misoriented_faces = 0;     ///< boundary triangles not facing their label's direction (or of zero area)
   int planes[3] = {0, 0, 0};     ///< distinct planes per axis (surface mode: with the border segments' lines)
   int degenerate_border_edges = 0;  ///< surface mode, open surfaces: border edges of zero length
-  /// Tet mode: vertices of the polycube's edges (on two planes, on a path of such vertices between
-  /// two corners), those whose deformed coordinate along the edge is out of order on that path
-  /// (not strictly between its neighbours', the corners counted at their plane heights), and those
-  /// of them past a corner's plane. The realization must move such a vertex back into order while
-  /// the planes pull the edge onto one line, which flattens the tets between it and its neighbour
-  /// (homer: 4 of the 9 boundary edges its failed realization collapsed have an end among them;
-  /// see README).
-  int edge_order_vertices = 0, edge_order_violations = 0, edge_order_past_corner = 0;
-  std::string edge_order_example;  ///< the first one past a corner ("vertex V past corner C along Z")
+  EdgeOrder edge_order;          ///< tet mode: the deformed mesh against the polycube's edges
   double seconds = 0;
 };
 

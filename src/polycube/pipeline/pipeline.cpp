@@ -744,12 +744,12 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
           where.clear();  // failed before any state: nothing to show
         }
-        // Vertices of polycube edges past a corner (see RealizeResult::edge_order_*): where chart
-        // borders run on past their corners, which the realization cannot undo without flattening tets.
+        // Vertices of polycube edges past a corner (see chart::EdgeOrder): where chart borders run
+        // on past their corners, which the realization cannot undo without flattening tets.
         const std::string order =
-            ex.edge_order_past_corner > 0
-                ? "; the deformed mesh has " + std::to_string(ex.edge_order_past_corner) +
-                      " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order_example +
+            ex.edge_order.past_corner > 0
+                ? "; the deformed mesh has " + std::to_string(ex.edge_order.past_corner) +
+                      " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order.example +
                       "), where chart borders run on past their corners"
                 : std::string();
         throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where);
@@ -772,9 +772,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
       if (!opt.surface)
-        pj["edge_order"] = {{"vertices", ex.edge_order_vertices},
-                            {"out_of_order", ex.edge_order_violations},
-                            {"past_corner", ex.edge_order_past_corner}};
+        pj["edge_order"] = {{"vertices", ex.edge_order.vertices},
+                            {"out_of_order", ex.edge_order.out_of_order},
+                            {"past_corner", ex.edge_order.past_corner}};
       if (opt.surface) pj["edge_flips"] = ex.edge_flips;
       pj["edge_collapses"] = ex.edge_collapses;
       pj["collapse_edge_splits"] = ex.collapse_edge_splits;
