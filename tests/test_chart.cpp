@@ -439,6 +439,16 @@ TEST(Realize, EdgeVerticesPastACornerAreCounted) {
   EXPECT_EQ(r.edge_order.past_corner, 1);
   EXPECT_EQ(r.edge_order.example,
             "vertex " + std::to_string(v) + " past corner " + std::to_string(corner) + " along X");
+  // With names (extract_polycube's retries realize a compacted copy): the message keeps the
+  // caller's numbering, here vertex i named 1000 + 2 i.
+  chart::RealizeOptions named;
+  for (int i = 0; i < tm.V.rows(); ++i) named.names.vertices.push_back(1000 + 2 * i);
+  named.names.next_vertex = 5000;
+  EXPECT_EQ(named.names.vertex(static_cast<int>(tm.V.rows()) + 3), 5003);
+  const auto rn = chart::realize_polycube(tm.V, tm.T, tm.boundary, D, labels, named);
+  EXPECT_EQ(rn.edge_order.past_corner, 1);
+  EXPECT_EQ(rn.edge_order.example, "vertex " + std::to_string(1000 + 2 * v) + " past corner " +
+                                       std::to_string(1000 + 2 * corner) + " along X");
 }
 
 TEST(Realize, FailureAfterUntanglingReturnsTheStateItReached) {

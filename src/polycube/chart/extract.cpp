@@ -233,7 +233,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   // The rest mesh the retries use: a kept vertex may move to the collapsed edge's midpoint.
   MatX3d cur_rest = T.rows() > 0 ? rest : MatX3d();
   auto realize_compact = [&](const MatX4i& CT, const MatX3i& CB, const std::vector<int>& CL,
-                             const std::vector<int>& merged, const RealizeOptions& ro) {
+                             const std::vector<int>& merged, const std::vector<int>& rows, const RealizeOptions& ro) {
     // The work mesh's vertices: the input's, then those of edges split for collapses.
     const int n = static_cast<int>(cur_rest.rows());
     std::vector<int> o2n(n, -1), n2o;
@@ -254,7 +254,13 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
     MatX3i BB = CB;
     for (int f = 0; f < BB.rows(); ++f)
       for (int j = 0; j < 3; ++j) BB(f, j) = o2n[CB(f, j)];
-    RealizeResult r = realize_polycube(R, TT, BB, D, CL, ro, hooks);
+    // Messages name vertices and triangles as in the work mesh (the input's numbering, then the
+    // split vertices), not the compacted copy's.
+    RealizeOptions named = ro;
+    named.names.vertices = n2o;
+    named.names.next_vertex = n;
+    named.names.faces = rows;
+    RealizeResult r = realize_polycube(R, TT, BB, D, CL, named, hooks);
     auto back = [&](int i) { return i < m ? n2o[i] : n + (i - m); };
     auto root = [&](int v) {
       while (merged[v] >= 0) v = merged[v];
@@ -288,7 +294,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   int collapses = 0, collapse_rounds = 0, split_edges = 0;
   auto realize_current = [&](const RealizeOptions& ro) {
     return collapses == 0 ? realize_polycube(rest, T, B, cur_def, CL, ro, hooks)
-                          : realize_compact(CT, CB, CL, merged, ro);
+                          : realize_compact(CT, CB, CL, merged, cb_row, ro);
   };
   // Tet mode: of the failed realizations on their planes with tets inverted, the one with the
   // fewest (then the fewest triangles facing away), with the labels and triangles it was realized

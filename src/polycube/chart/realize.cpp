@@ -351,7 +351,7 @@ class Realizer {
         who += (who.empty() ? "" : "; ") + std::string("tet ") + std::to_string(t) + " (";
         for (int j = 0; j < 4; ++j) {
           const int v = T_(t, j);
-          who += (j ? " " : "") + std::to_string(v) + ":";
+          who += (j ? " " : "") + std::to_string(opt_.names.vertex(v)) + ":";
           for (int k = 0; k < 3; ++k) who += planes_.of_vertex[k][v] >= 0 ? "XYZ"[k] : '-';
         }
         who += ")";
@@ -946,7 +946,7 @@ bool relax_eq17(const MatX3i& B, const MatX4i& T, const Planes& planes, MatX3d& 
 // What surrounds the inverted tets of r (a debug message): their vertices in r.X and deformed, and
 // the boundary triangles there with chart, label and both normals.
 std::string describe_inverted(const RealizeResult& r, const MatX3i& B, const std::vector<int>& labels,
-                              const std::vector<int>& chart_of_face, const MatX3d& deformed) {
+                              const std::vector<int>& chart_of_face, const MatX3d& deformed, const MeshNames& names) {
   std::ostringstream os;
   os.precision(4);
   std::vector<std::vector<int>> vf(deformed.rows());
@@ -964,12 +964,13 @@ std::string describe_inverted(const RealizeResult& r, const MatX3i& B, const std
     os << "inverted tet " << t << ":";
     for (int j = 0; j < 4; ++j) {
       const int v = r.T(t, j);
-      os << "\n  vertex " << v << " at (" << r.X.row(v) << ")";
+      os << "\n  vertex " << names.vertex(v) << " at (" << r.X.row(v) << ")";
       if (v >= deformed.rows()) continue;  // made by a split
       os << " deformed (" << deformed.row(v) << ")";
       for (int f : vf[v]) {
         const Vec3 nx = normal(r.X, f), nd = normal(deformed, f);
-        os << "\n    tri " << f << " (" << B(f, 0) << " " << B(f, 1) << " " << B(f, 2) << ") chart "
+        os << "\n    tri " << names.face(f) << " (" << names.vertex(B(f, 0)) << " " << names.vertex(B(f, 1)) << " "
+           << names.vertex(B(f, 2)) << ") chart "
            << chart_of_face[f] << " " << label_name(labels[f]) << " n_polycube (" << nx.normalized().transpose()
            << ") area " << 0.5 * nx.norm() << " n_deformed (" << nd.normalized().transpose() << ") area "
            << 0.5 * nd.norm();
@@ -1082,7 +1083,8 @@ void open_split_vertices(const MatX3d& rest, MatX3d& def, const MatX4i& T, int f
 // deformed coordinate of its vertices). Returns why there are none ("" when made).
 // charts / vcharts: the labelling's charts, and per vertex the charts around it.
 std::string make_planes(const MatX3d& deformed, const MatX3i& B, const std::vector<int>& labels, int n, Planes& planes,
-                        const Hooks& hooks, Charts& charts, std::vector<std::vector<int>>& vcharts) {
+                        const Hooks& hooks, Charts& charts, std::vector<std::vector<int>>& vcharts,
+                        const MeshNames& names) {
   charts = build_charts(deformed, B, labels);
   vcharts.assign(n, {});
   for (int f = 0; f < B.rows(); ++f)
@@ -1117,7 +1119,7 @@ std::string make_planes(const MatX3d& deformed, const MatX3i& B, const std::vect
               if (charts.label[a] / 2 == k && charts.label[b] == (charts.label[a] ^ 1) && uf.find(a) == root)
                 return "charts " + std::to_string(a) + " (" + label_name(charts.label[a]) + ") and " +
                        std::to_string(b) + " (" + label_name(charts.label[b]) + ") meet at vertex " +
-                       std::to_string(v) + ": the polycube would have zero thickness there";
+                       std::to_string(names.vertex(v)) + ": the polycube would have zero thickness there";
         return std::string("opposite charts of axis ") + "XYZ"[k] + " share a plane";
       }
       id[c] = id[root];
@@ -1227,7 +1229,7 @@ void for_each_edge_path(const MatX3i& B, const Planes& planes, int n, F&& f) {
 // The deformed mesh against the polycube's edges (see EdgeOrder): per simple path c0 -> c1 along
 // axis k, the sequence of the corners' plane heights and the path's deformed k coordinates must be
 // strictly monotone.
-EdgeOrder check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& deformed) {
+EdgeOrder check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& deformed, const MeshNames& names) {
   const int n = static_cast<int>(deformed.rows());
   EdgeOrder r;
   for_each_edge_path(B, planes, n, [&](int k, int c0, const std::vector<int>& path, int c1) {
@@ -1244,7 +1246,8 @@ EdgeOrder check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& 
       if (!past0 && !past1) continue;
       ++r.past_corner;
       if (r.example.empty())
-        r.example = "vertex " + std::to_string(path[i]) + " past corner " + std::to_string(past0 ? c0 : c1) +
+        r.example = "vertex " + std::to_string(names.vertex(path[i])) + " past corner " +
+                    std::to_string(names.vertex(past0 ? c0 : c1)) +
                     " along " + "XYZ"[k];
     }
   });
@@ -1271,10 +1274,11 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
   Planes planes;
   Charts charts;
   std::vector<std::vector<int>> vcharts;
-  if (const std::string why = make_planes(deformed, B, labels, n, planes, hooks, charts, vcharts); !why.empty())
+  if (const std::string why = make_planes(deformed, B, labels, n, planes, hooks, charts, vcharts, opt.names);
+      !why.empty())
     return fail(why);
   for (int k = 0; k < 3; ++k) r.planes[k] = planes.count[k];
-  r.edge_order = check_edge_order(B, planes, deformed);
+  r.edge_order = check_edge_order(B, planes, deformed, opt.names);
   const EdgeOrder& eo = r.edge_order;
   if (eo.out_of_order > 0)
     hooks.debug(std::to_string(eo.out_of_order) + " of the " + std::to_string(eo.vertices) +
@@ -1673,7 +1677,7 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       r.inverted = least->inverted;
       check_faces(B, labels, r);
       if (r.inverted > 0 && r.inverted <= 3 && hooks.log)
-        hooks.debug(describe_inverted(r, B, labels, charts.of_face, deformed));
+        hooks.debug(describe_inverted(r, B, labels, charts.of_face, deformed, opt.names));
     }
     return fail(failures);
   }

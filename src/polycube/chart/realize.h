@@ -42,6 +42,21 @@
 
 namespace polycube::chart {
 
+/// How a realization's messages name vertices and boundary triangles. extract_polycube's retries
+/// after edge collapses realize a compacted copy of the mesh (merged vertices and the collapsed
+/// edges' triangles left out); these names keep the caller's numbering in what they say. Empty:
+/// each one's own index.
+struct MeshNames {
+  std::vector<int> vertices;  ///< vertex i of the mesh given is vertices[i]
+  int next_vertex = 0;        ///< a vertex the realization adds (a split), i >= vertices.size(): next_vertex + i - size
+  std::vector<int> faces;     ///< row f of B is faces[f]
+  int vertex(int v) const {
+    const int m = static_cast<int>(vertices.size());
+    return m == 0 ? v : v < m ? vertices[v] : next_vertex + (v - m);
+  }
+  int face(int f) const { return f < static_cast<int>(faces.size()) ? faces[f] : f; }
+};
+
 struct RealizeOptions {
   /// "continuation", "eq17" (the paper's), or "auto": both; a result with every boundary triangle
   /// facing its label beats one without, then the lower final ARAP distortion wins. "previous":
@@ -50,6 +65,7 @@ struct RealizeOptions {
   /// vertices around the inverted tets), then the ARAP minimization. "penalty": the penalty path
   /// (see penalty_path) from the deformed mesh alone.
   std::string start = "auto";
+  MeshNames names;  ///< set by extract_polycube's retries on a compacted mesh (see MeshNames)
   /// Surface mode: the starts tried in turn until one realizes the layout: 1 the deformed surface
   /// on the planes, 2 also ARAP iterations from it, 3 also the harmonic layout (see
   /// realize_surface.cpp).
