@@ -43,7 +43,8 @@ struct Near {
 SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
                                const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
                                const std::function<double(int)>& worst, const SurfaceFitOptions& opt,
-                               const std::function<bool(int, const Vec3&, Vec3&)>& slide) {
+                               const std::function<bool(int, const Vec3&, Vec3&)>& slide,
+                               const std::function<double(int)>& shape) {
   SurfaceFitStats st;
   const int n = static_cast<int>(V.rows());
   const int nq = static_cast<int>(Q.rows());
@@ -87,6 +88,13 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     for (int v = 0; v < n; ++v)
       if (!vq[v].empty()) st.floor = std::min(st.floor, worst(v));
     st.floor = std::max(st.floor, 0.5);
+  }
+  double shape_floor = 0;
+  if (shape) {
+    shape_floor = 1e300;
+    for (int v = 0; v < n; ++v)
+      if (!vq[v].empty()) shape_floor = std::min(shape_floor, shape(v));
+    shape_floor = std::max(shape_floor, 0.5);
   }
 
   // Closest point of sample p among the quads `quads` at the current V, and v's weight in it.
@@ -285,7 +293,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       len /= std::max(1, count);
       if (step.norm() > 0.5 * len) step *= 0.5 * len / step.norm();
       if (!(step.norm() > 1e-12 * len)) continue;
-      const double q0 = worst(v);
+      const double q0 = worst(v), s0 = shape ? shape(v) : 0;
       const Vec3 x = V.row(v).transpose();
       for (double t : {1.0, 0.5, 0.25}) {
         Vec3 p;
@@ -302,7 +310,8 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           m1 = std::max(m1, d);
         }
         if (opt.two_sided) quad_side(e1, m1, nullptr, nullptr);
-        if (m1 <= m0 * (1 + 1e-12) && e1 < e0 * (1 - 1e-9) && worst(v) >= std::min(q0, st.floor)) {
+        if (m1 <= m0 * (1 + 1e-12) && e1 < e0 * (1 - 1e-9) && worst(v) >= std::min(q0, st.floor) &&
+            (!shape || shape(v) >= std::min(s0, shape_floor))) {
           ++moves;
           break;
         }

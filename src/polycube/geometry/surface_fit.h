@@ -70,9 +70,14 @@ struct SurfaceFitStats {
 /// slide (optional): for a vertex that is not free, slide(v, x, p) sets p to the point of v's sharp
 /// edge nearest x and returns true when v may slide along that edge (false: v stays, e.g. at a
 /// corner of the sharp edges); such vertices move like free ones, projected on their edge.
+/// shape (optional): a second quality around v, 1 where fine (e.g. against slivers, which the
+/// scaled Jacobian does not see), under the same rule as worst: a move never takes it below
+/// min(its floor, its value before), the floor being its smallest value before the fitting, or
+/// 0.5 if that is lower.
 SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& target, const TriangleTree& tree,
                                const std::vector<char>& free_vertex, const std::vector<int>* patch_of_face,
                                const std::function<double(int)>& worst, const SurfaceFitOptions& opt = {},
-                               const std::function<bool(int, const Vec3&, Vec3&)>& slide = {});
+                               const std::function<bool(int, const Vec3&, Vec3&)>& slide = {},
+                               const std::function<double(int)>& shape = {});
 
 }  // namespace polycube::geometry

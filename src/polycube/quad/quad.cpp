@@ -1,3 +1,4 @@
+#include <limits>
 #include "polycube/quad/quad.h"
 
 #include <algorithm>
@@ -25,6 +26,9 @@ constexpr double kPoorQuadChordGap = 0.1;
 /// The smoothing widens slivers (QuadOptions::max_edge_ratio) by moves that keep the worst quad
 /// around the vertex at least this (or where it was, if lower).
 constexpr double kSliverFloor = 0.5;
+/// The fitting to the surface may not take a quad's edge ratio above this (unless that quad was
+/// already there): the sliver warning's threshold.
+constexpr double kSliverRatio = 100;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
 constexpr double kCaptureMinQuality = 0.3;
@@ -153,6 +157,22 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return m;
   };
+  // The largest aspect (longest edge squared over area) of v's quads: the width of a thin
+  // rectangle grows when one of its corners moves out, where its edge ratio waits for the other.
+  const bool widen = opt.widen_slivers;
+  auto aspect = [&](int v) {
+    double m = 0;
+    for (int q : vq[v]) {
+      double longest = 0;
+      for (int j = 0; j < 4; ++j)
+        longest = std::max(longest, (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm());
+      const Vec3 d1 = (r.V.row(r.Q(q, 2)) - r.V.row(r.Q(q, 0))).transpose();
+      const Vec3 d2 = (r.V.row(r.Q(q, 3)) - r.V.row(r.Q(q, 1))).transpose();
+      const double area = 0.5 * d1.cross(d2).norm();
+      m = std::max(m, area > 0 ? longest * longest / area : std::numeric_limits<double>::infinity());
+    }
+    return m;
+  };
   // Where the worst quad around a vertex (`worst_q`: the smoothing passes its value before the
   // move, the pattern search, which visits vertices under search_below only, its value at the trial
   // position) is kSliverFloor or more, a move may not take its quads above
@@ -270,14 +290,19 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         // that widens one may lower the worst quad a little, down to kSliverFloor.
         const double ratio_before = opt.max_edge_ratio > 0 ? ratio(v) : 0;
         const bool sliver = opt.max_edge_ratio > 0 && ratio_before > opt.max_edge_ratio;
+        const double aspect_before =
+            sliver && widen && ratio_before > kSliverRatio && before >= kSliverFloor ? aspect(v) : 0;
         for (double t : {1.0, 0.5, 0.25}) {
           const Vec3 p = onto_surface(v, x + t * (c - x), nrm, cross);
           r.V.row(v) = p.transpose();
           const double after = worst(v);
           const double ratio_after = opt.max_edge_ratio > 0 ? ratio(v) : 0;
+          const bool widened = sliver && (ratio_after < 0.9 * ratio_before ||
+                                          (widen && ratio_before > kSliverRatio && before >= kSliverFloor &&
+                                           ratio_after <= 1.1 * ratio_before && aspect(v) < 0.9 * aspect_before));
           if (((after > before + 1e-9 || (after >= before && after > 0.3)) &&
                ratio_guard(before, ratio_before, ratio_after)) ||
-              (sliver && after >= std::min(before, kSliverFloor) && ratio_after < 0.9 * ratio_before)) {
+              (widened && after >= std::min(before, kSliverFloor))) {
             ++moves;
             break;
           }
@@ -348,8 +373,14 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         if (!slide_ends(v, a, b)) return false;
         return geometry::closest_on_sharp_edge(target, sharp, adj, tree, x, 0.5 * elen, p);
       };
+      // The fitting may not squeeze quads into slivers either: its second quality is
+      // max_edge_ratio / the largest edge ratio of v's quads, at most 1.
+      std::function<double(int)> shape;
+      if (widen && opt.max_edge_ratio > 0)
+        shape = [&](int v) { return std::min(1.0, 0.5 * kSliverRatio / ratio(v)); };
       r.fit = geometry::fit_to_surface(r.V, r.Q, target, tree, free_vertex, &patch_of_face, worst, opt.fit,
-                                       opt.fit_slide ? std::function<bool(int, const Vec3&, Vec3&)>(slide) : nullptr);
+                                       opt.fit_slide ? std::function<bool(int, const Vec3&, Vec3&)>(slide) : nullptr,
+                                       shape);
     }
   };
   // Creases no quad edge follows: the nearest path of quad edges is moved onto them and stays. A
