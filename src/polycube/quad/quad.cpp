@@ -1,8 +1,8 @@
-#include <limits>
 #include "polycube/quad/quad.h"
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "polycube/core/topology.h"
 #include "polycube/geometry/closest_point.h"
@@ -290,16 +290,17 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         // that widens one may lower the worst quad a little, down to kSliverFloor.
         const double ratio_before = opt.max_edge_ratio > 0 ? ratio(v) : 0;
         const bool sliver = opt.max_edge_ratio > 0 && ratio_before > opt.max_edge_ratio;
-        const double aspect_before =
-            sliver && widen && ratio_before > kSliverRatio && before >= kSliverFloor ? aspect(v) : 0;
+        // A sliver over kSliverRatio (QuadOptions::widen_slivers): a move may widen it by its aspect.
+        const bool by_aspect = sliver && widen && ratio_before > kSliverRatio && before >= kSliverFloor;
+        const double aspect_before = by_aspect ? aspect(v) : 0;
         for (double t : {1.0, 0.5, 0.25}) {
           const Vec3 p = onto_surface(v, x + t * (c - x), nrm, cross);
           r.V.row(v) = p.transpose();
           const double after = worst(v);
           const double ratio_after = opt.max_edge_ratio > 0 ? ratio(v) : 0;
-          const bool widened = sliver && (ratio_after < 0.9 * ratio_before ||
-                                          (widen && ratio_before > kSliverRatio && before >= kSliverFloor &&
-                                           ratio_after <= 1.1 * ratio_before && aspect(v) < 0.9 * aspect_before));
+          const bool widened =
+              sliver && (ratio_after < 0.9 * ratio_before ||
+                         (by_aspect && ratio_after <= 1.1 * ratio_before && aspect(v) < 0.9 * aspect_before));
           if (((after > before + 1e-9 || (after >= before && after > 0.3)) &&
                ratio_guard(before, ratio_before, ratio_after)) ||
               (widened && after >= std::min(before, kSliverFloor))) {
@@ -374,7 +375,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         return geometry::closest_on_sharp_edge(target, sharp, adj, tree, x, 0.5 * elen, p);
       };
       // The fitting may not squeeze quads into slivers either: its second quality is
-      // max_edge_ratio / the largest edge ratio of v's quads, at most 1.
+      // 0.5 kSliverRatio / the largest edge ratio of v's quads, at most 1, whose floor (0.5) is an
+      // edge ratio of kSliverRatio.
       std::function<double(int)> shape;
       if (widen && opt.max_edge_ratio > 0)
         shape = [&](int v) { return std::min(1.0, 0.5 * kSliverRatio / ratio(v)); };
