@@ -26,8 +26,9 @@ constexpr double kPoorQuadChordGap = 0.1;
 /// The smoothing widens slivers (QuadOptions::max_edge_ratio) by moves that keep the worst quad
 /// around the vertex at least this (or where it was, if lower).
 constexpr double kSliverFloor = 0.5;
-/// The fitting to the surface may not take a quad's edge ratio above this (unless that quad was
-/// already there): the sliver warning's threshold.
+/// Quads over this edge ratio are slivers (the warning's threshold): the smoothing widens them by
+/// their aspect, and the fitting to the surface may not take a quad above it (see
+/// QuadOptions::widen_slivers).
 constexpr double kSliverRatio = 100;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
@@ -375,8 +376,9 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
         return geometry::closest_on_sharp_edge(target, sharp, adj, tree, x, 0.5 * elen, p);
       };
       // The fitting may not squeeze quads into slivers either: its second quality is
-      // 0.5 kSliverRatio / the largest edge ratio of v's quads, at most 1, whose floor (0.5) is an
-      // edge ratio of kSliverRatio.
+      // 0.5 kSliverRatio / the largest edge ratio of v's quads, at most 1. Its floor, the mesh's
+      // smallest value or 0.5 if lower, keeps the largest edge ratio (counted as at least
+      // 0.5 kSliverRatio and at most kSliverRatio) from growing.
       std::function<double(int)> shape;
       if (widen && opt.max_edge_ratio > 0)
         shape = [&](int v) { return std::min(1.0, 0.5 * kSliverRatio / ratio(v)); };

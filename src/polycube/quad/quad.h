@@ -36,8 +36,9 @@ struct QuadOptions {
   /// Slivers (quads with an edge ratio over 100, the warning's threshold): a move of one corner
   /// never lowers a thin rectangle's edge ratio (its other short edge stays), so the smoothing also
   /// takes moves that lower the largest aspect of the vertex's quads (longest edge squared over
-  /// area) by 10%+ without raising their edge ratio; and the fitting to the surface may not take a
-  /// quad above edge ratio 100 (unless it was there already). Homer at 2000 quads (surface mode):
+  /// area) by 10%+ without raising their edge ratio by more than 10%; and the fitting to the
+  /// surface may not take a quad's edge ratio above the mesh's largest before it (counted as at
+  /// least 50 and at most 100), nor raise it where it is above that. Homer at 2000 quads (surface mode):
   /// edge ratio max 586 -> 219, quads over 10 400 -> 134, scaled Jacobian 0.234 / 0.874 -> 0.278 /
   /// 0.903, Hausdorff 26.7e-3 -> 28.5e-3 (its thin-step retry now kept: 3212 -> 2958 quads); cow
   /// 295 -> 151, the same Hausdorff; spot 77.5 -> 68.6; fandisk and rocker at Table I's counts and
