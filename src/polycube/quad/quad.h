@@ -52,8 +52,9 @@ struct QuadOptions {
   /// Closed surfaces only; 0 = every plane keeps a cell.
   double merge_thin_steps = 0.01;
   /// Surface mode (surface_quads_best_start): quads with an edge ratio over 100 (slivers, whose
-  /// scaled Jacobian may be near 1), in the finished mesh or the extracted grid, are extracted again with thin steps up to 0.05, then 0.25 cells
-  /// merged, and a retry is kept when it has fewer slivers (fewer_sliver_quads). spot at 2000 quads:
+  /// scaled Jacobian may be near 1), in the finished mesh or the extracted grid, are extracted
+  /// again with thin steps up to 0.05, then 0.25 cells merged, and a retry is kept when it has
+  /// fewer slivers (fewer_sliver_quads). spot at 2000 quads:
   /// 0.05 takes the edge ratio max 6059 -> 362, quads over 10 112 -> 45, mean 0.938 -> 0.949, the
   /// same Hausdorff. false: merge_thin_steps alone.
   bool thin_step_retries = true;
