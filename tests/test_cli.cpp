@@ -342,6 +342,8 @@ TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {
   ASSERT_EQ(r.code, 0) << r.output;
   json j = report(out);
   EXPECT_DOUBLE_EQ(j["quad"]["options"]["sharp_angle_deg"].get<double>(), 30.0);
+  EXPECT_DOUBLE_EQ(j["quad"]["options"]["max_edge_ratio"].get<double>(), 10.0);
+  EXPECT_TRUE(j["quad"]["options"]["widen_slivers"].get<bool>());
   EXPECT_GT(j["quad"]["feature_vertices"].get<int>(), 0);
   EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 0.0);  // surface default
   r = run_cli("--example box_hole --surface --quad --quads 300 --sharp-angle 100 --crease-angle 120 -q -o " + out);
