@@ -26,6 +26,27 @@ hex::HexResult grid_of_box(const SurfaceMesh& s) {
   return hex::hex_mesh_from_polycube(tm.V, tm.T, tm.V, tm.boundary, labels, &s, o);
 }
 
+// The surface z = height(x, y) over the unit square, n x n cells, each split along its
+// anti-diagonal (so that the line x + y = 1 is made of edges).
+template <class Height>
+SurfaceMesh height_field(int n, Height height) {
+  SurfaceMesh s;
+  s.V.resize((n + 1) * (n + 1), 3);
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= n; ++j) {
+      const double x = double(i) / n, y = double(j) / n;
+      s.V.row(i * (n + 1) + j) << x, y, height(x, y);
+    }
+  s.F.resize(2 * n * n, 3);
+  for (int i = 0, f = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const int a = i * (n + 1) + j, b = a + n + 1;
+      s.F.row(f++) << a, b, a + 1;
+      s.F.row(f++) << b, b + 1, a + 1;
+    }
+  return s;
+}
+
 // The vertex of V at p (-1 if none).
 int vertex_at(const MatX3d& V, const Eigen::RowVector3d& p) {
   for (int v = 0; v < V.rows(); ++v)
@@ -218,23 +239,8 @@ TEST(Quad, CaptureThatWouldFoldQuadsIsUndone) {
   // A crease across the grid: the surface z = 0 bent up by 45 degrees along the diagonal line
   // x + y = 1 (a sharp edge no grid line follows). A path of grid edges onto it is a staircase
   // whose quads would fold or flatten, so the capture is undone and the mesh is left as smoothed.
-  const int n = 20;
   auto height = [](double x, double y) { return std::max(0.0, (x + y - 1) / std::sqrt(2.0)); };
-  SurfaceMesh s;
-  s.V.resize((n + 1) * (n + 1), 3);
-  for (int i = 0; i <= n; ++i)
-    for (int j = 0; j <= n; ++j) {
-      const double x = double(i) / n, y = double(j) / n;
-      s.V.row(i * (n + 1) + j) << x, y, height(x, y);
-    }
-  s.F.resize(2 * n * n, 3);
-  for (int i = 0, f = 0; i < n; ++i)
-    for (int j = 0; j < n; ++j) {
-      const int a = i * (n + 1) + j, b = a + n + 1;
-      // Split along the anti-diagonal so that the crease x + y = 1 is made of edges.
-      s.F.row(f++) << a, b, a + 1;
-      s.F.row(f++) << b, b + 1, a + 1;
-    }
+  const SurfaceMesh s = height_field(20, height);
   quad::QuadResult r;
   const int m = 6;
   r.V.resize((m + 1) * (m + 1), 3);
@@ -543,18 +549,7 @@ TEST(Quad, SliverColumnIsWidened) {
   // free, and no single corner move lowers their edge ratio (the other short edge stays), nor
   // raises any scaled Jacobian (they are rectangles). With QuadOptions::widen_slivers the
   // smoothing takes the moves that lower their aspect instead: the middle ones widen.
-  const int n = 10;
-  SurfaceMesh s;
-  s.V.resize((n + 1) * (n + 1), 3);
-  for (int i = 0; i <= n; ++i)
-    for (int j = 0; j <= n; ++j) s.V.row(i * (n + 1) + j) << double(i) / n, double(j) / n, 0;
-  s.F.resize(2 * n * n, 3);
-  for (int i = 0, f = 0; i < n; ++i)
-    for (int j = 0; j < n; ++j) {
-      const int a = i * (n + 1) + j, b = a + n + 1;
-      s.F.row(f++) << a, b, a + 1;
-      s.F.row(f++) << b, b + 1, a + 1;
-    }
+  const SurfaceMesh s = height_field(10, [](double, double) { return 0.0; });
   const std::vector<double> xs{0, 0.2, 0.4, 0.4001, 0.6, 0.8, 1.0}, ys{0, 0.25, 0.5, 0.75, 1.0};
   const int nx = static_cast<int>(xs.size()), ny = static_cast<int>(ys.size());
   auto run = [&](bool widen) {

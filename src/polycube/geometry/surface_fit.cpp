@@ -82,20 +82,15 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     for (int v = 0; v < n; ++v)
       if (!vq[v].empty()) patch[v] = (*patch_of_face)[tree.closest(V.row(v).transpose()).face];
   const MatX3i QT = split_quads(Q);
-  st.floor = opt.quality_floor;
-  if (st.floor < 0) {
-    st.floor = 1e300;
+  // The default floor of a quality: its smallest value over the quads' vertices, or 0.5 if lower.
+  auto default_floor = [&](const std::function<double(int)>& quality) {
+    double m = 1e300;
     for (int v = 0; v < n; ++v)
-      if (!vq[v].empty()) st.floor = std::min(st.floor, worst(v));
-    st.floor = std::max(st.floor, 0.5);
-  }
-  double shape_floor = 0;
-  if (shape) {
-    shape_floor = 1e300;
-    for (int v = 0; v < n; ++v)
-      if (!vq[v].empty()) shape_floor = std::min(shape_floor, shape(v));
-    shape_floor = std::max(shape_floor, 0.5);
-  }
+      if (!vq[v].empty()) m = std::min(m, quality(v));
+    return std::max(m, 0.5);
+  };
+  st.floor = opt.quality_floor >= 0 ? opt.quality_floor : default_floor(worst);
+  const double shape_floor = shape ? default_floor(shape) : 0;
 
   // Closest point of sample p among the quads `quads` at the current V, and v's weight in it.
   auto nearest = [&](const Vec3& p, const std::vector<int>& quads, int v) {
