@@ -137,6 +137,12 @@ struct HexResult {
   /// HexOptions::untangle on the result: its inverted hexes before, and after (kept) or -1 (not
   /// kept, or not needed).
   int untangle_inverted_before = 0, untangle_inverted_after = -1;
+  /// The boundary was fitted to the target again after the untangling (whose optimization lets it
+  /// slide for quality alone), the fit statistics then cover both fittings.
+  bool refitted_after_untangling = false;
+  /// The Hausdorff distance (absolute, as hex::hausdorff measures it) before that fitting was
+  /// tried; -1 when it was not (no untangling kept, or no fitting).
+  double hausdorff_before_refit = -1;
   geometry::SurfaceFitStats fit;  ///< the fitting of the boundary to the target (target samples to hex boundary)
   double seconds = 0;
 };

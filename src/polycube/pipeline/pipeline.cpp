@@ -1062,7 +1062,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         hj["extracted"].erase("sj_histogram");
         hj["smooth_moves"] = hr.smooth_moves;
         hj["untangled"] = {{"inverted_before", hr.untangle_inverted_before},
-                           {"inverted_after", hr.untangle_inverted_after}};
+                           {"inverted_after", hr.untangle_inverted_after},
+                           {"refitted", hr.refitted_after_untangling},
+                           {"hausdorff_before_refit_rel",
+                            hr.hausdorff_before_refit < 0 ? -1.0 : hr.hausdorff_before_refit / diag}};
         hj["fit"] = fit_json(hr.fit, diag);
         hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
                          {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
