@@ -360,6 +360,12 @@ int main(int argc, char** argv) {
                "axis-aligned and are kept). Not with --hex");
   bool run_quad = false;
   app.add_flag("--quad", run_quad, "Run through to the quad mesh of the surface (same as --until quad)");
+  app.add_option("--corner-splits", opt.corner_splits,
+                 "Polycube realization (volume): split the interior edges from the polycube's corners to free "
+                 "vertices first, giving each corner's star room: auto (extract again with them when no valid "
+                 "polycube is realized without; kept if realized or fewer tets stay inverted), on (from the "
+                 "start), off")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "on", "off"}));
   app.add_option("--surface-retry", opt.surface_retry_barrier,
                  "Surface mode: if no valid polycube is realized, deform again with the anti-foldover barrier "
                  "weight times this (<= 1: no retry)")

@@ -1304,7 +1304,8 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
     }
     return in;
   };
-  // ---- split interior edges whose ends lie on one plane ----
+  // ---- split interior edges whose ends lie on one plane (and, with split_corner_edges, those from
+  // a corner to a vertex on no plane) ----
   MatX3d rest = rest_in, def = deformed;
   MatX4i T = T_in;
   {
@@ -1315,8 +1316,18 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       return false;
     };
     std::vector<std::pair<int, int>> cand;
-    for (auto e : unique_edges(T))
-      if (same_plane(e.first, e.second) && !std::binary_search(bedges.begin(), bedges.end(), e)) cand.push_back(e);
+    auto planes_of = [&](int u) {
+      int c = 0;
+      for (int k = 0; k < 3; ++k) c += planes.of_vertex[k][u] >= 0;
+      return c;
+    };
+    for (auto e : unique_edges(T)) {
+      if (std::binary_search(bedges.begin(), bedges.end(), e)) continue;
+      if (same_plane(e.first, e.second) ||
+          (opt.split_corner_edges && ((planes_of(e.first) == 3 && planes_of(e.second) == 0) ||
+                                      (planes_of(e.second) == 3 && planes_of(e.first) == 0))))
+        cand.push_back(e);
+    }
     const auto made = split_tet_edges(T, n, cand);
     const int nn = n + static_cast<int>(made.size());
     rest.conservativeResize(nn, 3);

@@ -65,6 +65,13 @@ struct RealizeOptions {
   /// vertices around the inverted tets), then the ARAP minimization. "penalty": the penalty path
   /// (see penalty_path) from the deformed mesh alone.
   std::string start = "auto";
+  /// Tet mode: the interior edges from each polycube corner (a boundary vertex on three planes) to
+  /// a vertex on no plane are split at their midpoints before the realization (with those between
+  /// two vertices on one plane, which always are), so that each corner's star has free vertices
+  /// close to it. tet/hand (30.9k tets, `--volume-boost 10`): realized with it (32 charts, 60
+  /// corners, ARAP 0.1216) where every retry without it left one tet inverted at a corner; spot
+  /// (17.4k tets) is realized without it and not with it, hence PipelineOptions::corner_splits.
+  bool split_corner_edges = false;
   MeshNames names;  ///< set by extract_polycube's retries on a compacted mesh (see MeshNames)
   /// Surface mode: the starts tried in turn until one realizes the layout: 1 the deformed surface
   /// on the planes, 2 also ARAP iterations from it, 3 also the harmonic layout (see
