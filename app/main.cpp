@@ -360,7 +360,7 @@ int main(int argc, char** argv) {
                "axis-aligned and are kept). Not with --hex");
   bool run_quad = false;
   app.add_flag("--quad", run_quad, "Run through to the quad mesh of the surface (same as --until quad)");
-  app.add_option("--corner-splits", opt.corner_splits,
+  app.add_option("--corner-splits", opt.polycube.corner_splits,
                  "Polycube realization (volume): split the interior edges from the polycube's corners to free "
                  "vertices first, giving each corner's star room: auto (extract again with them when no valid "
                  "polycube is realized without; kept if realized or fewer tets stay inverted), on (from the "

@@ -813,7 +813,29 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
 
 PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
                                     const ExtractOptions& opt, const Hooks& hooks) {
-  if (T.rows() > 0) return extract(rest, T, B, deformed, opt, hooks, nullptr);
+  if (T.rows() > 0) {
+    ExtractOptions o = opt;
+    if (opt.corner_splits == "on") o.realize.split_corner_edges = true;
+    PolycubeExtraction e = extract(rest, T, B, deformed, o, hooks, nullptr);
+    if (e.realized.success || opt.corner_splits != "auto" || o.realize.split_corner_edges) return e;
+    // A polycube corner whose star has no free vertex near it can keep a tet inverted that no
+    // retry opens (tet/hand); splitting its interior edges makes room, but changes the realization
+    // of shapes realized without (spot), so it is the retry.
+    hooks.warn("no valid polycube (" + e.realized.failure +
+               "); extracting again with the interior edges from the corners split");
+    o.realize.split_corner_edges = true;
+    PolycubeExtraction again = extract(rest, T, B, deformed, o, hooks, nullptr);
+    CornerSplitRetry c;
+    c.tried = true;
+    c.reason = e.realized.failure;
+    c.success = again.realized.success;
+    c.inverted = again.realized.inverted;
+    c.kept = again.realized.success || (is_folded(again.realized) &&
+                                        (!is_folded(e.realized) || again.realized.inverted < e.realized.inverted));
+    PolycubeExtraction& kept = c.kept ? again : e;
+    kept.corner_split_retry = c;
+    return std::move(kept);
+  }
   ExtractOptions surface = opt;
   surface.cleanup.pinch_above = opt.cleanup.pinch_above_surface;
   PolycubeExtraction e = extract(rest, T, B, deformed, surface, hooks, nullptr);

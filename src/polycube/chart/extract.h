@@ -12,6 +12,12 @@
 namespace polycube::chart {
 
 struct ExtractOptions {
+  /// Tet mode: split the interior edges from the polycube's corners to vertices on no plane before
+  /// the realization (RealizeOptions::split_corner_edges): "auto" extracts again with them when no
+  /// valid polycube was realized without, and keeps that extraction if it realizes the polycube or
+  /// ends folded with fewer tets inverted (PolycubeExtraction::corner_split_retry); "on": from the
+  /// start (realize.split_corner_edges); "off": as realize.split_corner_edges says.
+  std::string corner_splits = "auto";
   /// Surface mode: when the realization leaves at most this many triangles folded, edge flips
   /// inside their charts are tried (see PolycubeExtraction::flipped_B); 0 = off.
   int max_flip_faces = 150;
@@ -63,8 +69,18 @@ struct ExtractOptions {
   RealizeOptions realize;
 };
 
+/// ExtractOptions::corner_splits "auto": the second extraction, when the first realized nothing.
+struct CornerSplitRetry {
+  bool tried = false;
+  std::string reason;   ///< the first extraction's failure
+  bool success = false; ///< the second realized the polycube
+  int inverted = 0;     ///< tets the second left inverted
+  bool kept = false;    ///< the result is the second extraction
+};
+
 struct PolycubeExtraction {
   std::vector<int> labels;   ///< per boundary triangle (row of B), after cleanup
+  CornerSplitRetry corner_split_retry;
   int initial_charts = 0;    ///< charts of the raw labelling
   CleanupStats cleanup;
   ChartReport charts;        ///< the cleaned chart graph

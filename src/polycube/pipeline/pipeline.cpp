@@ -600,26 +600,12 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       Stopwatch sp;
       hooks.report("polycube", 0);
       hooks.info("extracting the polycube");
-      chart::ExtractOptions xo = opt.polycube;
-      if (opt.corner_splits == "on") xo.realize.split_corner_edges = true;
       chart::PolycubeExtraction ex =
-          given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, xo, hooks);
-      if (!given_map && !opt.surface && !ex.realized.success && opt.corner_splits == "auto") {
-        // A polycube corner whose star has no free vertex near it can leave a tet inverted that
-        // no retry opens (tet/hand); splitting its interior edges makes room, but changes the
-        // realization of shapes realized without (spot), so it is the retry.
-        hooks.warn("no valid polycube (" + ex.realized.failure +
-                   "); extracting again with the interior edges from the corners split");
-        xo.realize.split_corner_edges = true;
-        chart::PolycubeExtraction again = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, xo, hooks);
-        const bool better = again.realized.success ||
-                            (chart::is_folded(again.realized) &&
-                             (!chart::is_folded(ex.realized) || again.realized.inverted < ex.realized.inverted));
-        report["polycube"]["corner_split_retry"] = {{"reason", ex.realized.failure},
-                                                    {"success", again.realized.success},
-                                                    {"inverted", again.realized.inverted},
-                                                    {"kept", better}};
-        if (better) ex = std::move(again);
+          given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+      if (ex.corner_split_retry.tried) {
+        const chart::CornerSplitRetry& c = ex.corner_split_retry;
+        report["polycube"]["corner_split_retry"] = {
+            {"reason", c.reason}, {"success", c.success}, {"inverted", c.inverted}, {"kept", c.kept}};
       }
       if (given_map) report["polycube"]["source"] = opt.polycube_map;
       if (!ex.realized.success && opt.surface && opt.surface_retry_barrier > 1) {
@@ -693,8 +679,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"pinch_above", ex.cleanup.pinch_above},
                        {"max_pinches", opt.polycube.cleanup.max_pinches}};
       pj["realize_options"] = {{"start", opt.polycube.realize.start},
-                               {"corner_splits", opt.corner_splits},
-                               {"split_corner_edges", xo.realize.split_corner_edges},
+                               {"corner_splits", opt.polycube.corner_splits},
                                {"eq17_budget", opt.polycube.realize.eq17_budget},
                                {"untangle_patience", opt.polycube.realize.untangle_patience},
                                {"local_first", opt.polycube.realize.local_first},

@@ -42,11 +42,6 @@ struct PipelineOptions {
   /// Surface mode: when no valid polycube is realized, deform again with the anti-foldover
   /// barrier weight times this and extract again (values <= 1: no retry).
   double surface_retry_barrier = 10;
-  /// Volume mode: split the interior edges from the polycube's corners before the realization
-  /// (RealizeOptions::split_corner_edges): "auto" (default) extracts again with them when no valid
-  /// polycube was realized without, and keeps that extraction if it realizes the polycube or ends
-  /// with fewer tets inverted; "on": from the start; "off": never.
-  std::string corner_splits = "auto";
   Stage until = Stage::Tet;    ///< stop after this stage
   /// Volume mode with Stage::Hex (or Stage::Quad: the quads the same way): when no valid polycube
   /// is realized but the state the realization reached lies on its planes (planarity 1e-9) with at
