@@ -106,13 +106,18 @@ void expect_exact_polycube(const nlohmann::json& p) {
   EXPECT_TRUE(p["chart_graph"]["valid"].get<bool>()) << p["chart_graph"].dump();
 }
 
-// Runs the pipeline on a shared mesh through `until` into a fresh temp folder.
-nlohmann::json run_shared(const std::string& path, const std::string& dir, Stage until) {
+// The pipeline's options for a shared mesh through `until` into a fresh temp folder.
+PipelineOptions shared_options(const std::string& path, const std::string& dir, Stage until) {
   PipelineOptions opt;
   opt.input = path;
   opt.out_dir = temp_dir(dir);
   opt.until = until;
-  return run_pipeline(opt);
+  return opt;
+}
+
+// Runs the pipeline with shared_options.
+nlohmann::json run_shared(const std::string& path, const std::string& dir, Stage until) {
+  return run_pipeline(shared_options(path, dir, until));
 }
 
 }  // namespace
@@ -152,10 +157,7 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
 TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
   const std::string path = shared_dir() + "/meshes/organic/spot.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions o;
-  o.input = path;
-  o.out_dir = temp_dir("real_polycube_spot");
-  o.until = Stage::Polycube;
+  PipelineOptions o = shared_options(path, "real_polycube_spot", Stage::Polycube);
   o.tet.target_tets = 20000;
   nlohmann::json j = run_pipeline(o);
   const std::string out = (test_temp_root() / "real_polycube_spot").string();
@@ -207,10 +209,7 @@ TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
 TEST(RealPolycubeOrganic, TheHandIsRealizedWithItsCornersEdgesSplit) {
   const std::string path = shared_dir() + "/meshes/tet/hand.mesh";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  PipelineOptions o;
-  o.input = path;
-  o.out_dir = temp_dir("real_polycube_hand");
-  o.until = Stage::Polycube;
+  PipelineOptions o = shared_options(path, "real_polycube_hand", Stage::Polycube);
   o.deform.volume_boost_factor = 10;
   nlohmann::json j = run_pipeline(o);
   const auto& p = j["polycube"];

@@ -320,6 +320,11 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     std::vector<std::array<int, 2>> slide;
   };
   // Runs on its own thread when both variants are tried: reports progress only when `report`.
+  // Two-sided Hausdorff distance between the boundary of hexes (P, Hc) and the target, as the
+  // report measures it.
+  const auto boundary_distance = [&](const MatX3d& P, const MatX8i& Hc) {
+    return hausdorff(P, triangulate_quads(boundary_quads(Hc)), target->V, target->F).max;
+  };
   auto finish = [&](bool pillow, bool report, bool capture = false) {
     const MatX3d& VS = capture ? V_cap : V;  // the grid vertices (with the crease runs moved)
     Candidate c;
@@ -518,12 +523,9 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
             MatX3d W = c.V;
             const geometry::SurfaceFitStats f = fit_boundary(W);
             const HexQuality q2 = hex_quality(W, c.H);
-            const auto distance = [&](const MatX3d& P) {
-              return hausdorff(P, triangulate_quads(boundary_quads(c.H)), target->V, target->F).max;
-            };
             const bool better = q2.inverted <= q.inverted && q2.sj_min >= q.sj_min - 1e-9;
-            c.hausdorff_before_refit = distance(c.V);
-            const double d2 = better ? distance(W) : c.hausdorff_before_refit;
+            c.hausdorff_before_refit = boundary_distance(c.V, c.H);
+            const double d2 = better ? boundary_distance(W, c.H) : c.hausdorff_before_refit;
             if (report)
               hooks.debug("hex fitting after the untangling: Hausdorff " + std::to_string(c.hausdorff_before_refit) +
                           " -> " + std::to_string(d2) + ", min scaled Jacobian " + std::to_string(q.sj_min) + " -> " +
@@ -577,10 +579,8 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
     // two-sided Hausdorff distance, as the report measures it) and its worst hex is at least
     // min(0.3, the worst without); a worse worst hex only for a smaller distance.
     Candidate cap = finish(best.pillow_hexes > 0, false, true);
-    const auto distance = [&](const Candidate& c) {
-      return hausdorff(c.V, triangulate_quads(boundary_quads(c.H)), target->V, target->F).max;
-    };
-    const double d_base = distance(best), d_cap = cap.captured > 0 ? distance(cap) : 1e300;
+    const double d_base = boundary_distance(best.V, best.H),
+                 d_cap = cap.captured > 0 ? boundary_distance(cap.V, cap.H) : 1e300;
     const bool keep = cap.captured > 0 && d_cap < d_base &&
                       cap.quality.sj_min >= std::min(kCaptureFloor, best.quality.sj_min) - 1e-9;
     hooks.debug("hex crease capture: " + std::to_string(runs.size()) + " runs, " + std::to_string(cap.captured) +
