@@ -202,6 +202,16 @@ int main(int argc, char** argv) {
   app.add_option("--crush-guard-ratio", d.crush_guard_ratio,
                  "Polycube deformation (volume): the volume ratio under which the crush guard acts")
       ->capture_default_str()->check(CLI::Range(1e-6, 0.9));
+  app.add_option("--rescue-cg-tolerance", d.rescue_cg_tolerance,
+                 "Polycube deformation (volume): when the schedule ends above --target-quality, deform again from "
+                 "rest with the SQP systems solved to this relative residual from schedule step --rescue-from-step on, "
+                 "and keep the better result (0 = off)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  int rescue_step = d.rescue_from_step + 1;
+  app.add_option("--rescue-from-step", rescue_step,
+                 "Polycube deformation (volume): the schedule step (1 = the first) from which the stall rescue solves "
+                 "more exactly")
+      ->capture_default_str()->check(CLI::Range(1, 100));
   bool plain_hessian = false;
   app.add_flag("--no-lagrangian-hessian", plain_hessian,
                "Polycube deformation: leave the area constraint's curvature out of the SQP Hessian (slower "
@@ -401,6 +411,7 @@ int main(int argc, char** argv) {
 
   if (no_rotation) opt.deform.global_rotation = false;
   if (plain_hessian) opt.deform.lagrangian_hessian = false;
+  opt.deform.rescue_from_step = rescue_step - 1;
   if (no_creases) opt.quad.capture_creases = false;
   opt.quad.sharp_angle_deg = hx.sharp_angle_deg;
   opt.quad.merge_thin_steps = hx.merge_thin_steps;

@@ -114,6 +114,41 @@ TEST(Deform, TheNeutralVolumeBarrierDoesNotRoundTheShape) {
   EXPECT_EQ(neutral.inverted, 0);
 }
 
+TEST(Deform, TheStallRescueRunsAgainOnlyWhenTheTargetIsMissedAndKeepsTheBetter) {
+  // A target no schedule reaches (1e-7) makes the first run miss it: the deformation runs again,
+  // solved more exactly from the rescue's step on, and keeps the better of the two. The first run
+  // is the deformation without the rescue, to the bit; runs that reach the target, or whose
+  // schedule was cut short before the rescue's step, are not run again.
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  deform::DeformOptions o;
+  o.target_quality = 1e-7;
+  o.max_alpha_steps = 11;
+  o.rescue_from_step = 8;
+  const auto rescued = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, o);
+  ASSERT_GT(rescued.rescue_from_quality, 0) << "the target was missed: the rescue should have run";
+  EXPECT_EQ(rescued.inverted, 0);
+  if (rescued.rescued)
+    EXPECT_LT(rescued.l1_quality, rescued.rescue_from_quality);
+  else
+    EXPECT_EQ(rescued.l1_quality, rescued.rescue_from_quality);
+  deform::DeformOptions off = o;
+  off.rescue_cg_tolerance = 0;
+  const auto first = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, off);
+  EXPECT_EQ(first.rescue_from_quality, -1);
+  EXPECT_FALSE(first.rescued);
+  EXPECT_EQ(first.l1_quality, rescued.rescue_from_quality) << "the first run changed";
+  if (!rescued.rescued) {
+    EXPECT_EQ((rescued.X - first.X).cwiseAbs().maxCoeff(), 0.0) << "the first run's result is kept";
+  }
+  deform::DeformOptions short_schedule = o;
+  short_schedule.max_alpha_steps = 9;  // ends one step after the rescue's start: no second run
+  EXPECT_EQ(deform::deform_to_polycube(tm.V, tm.T, tm.boundary, short_schedule).rescue_from_quality, -1);
+  const auto reached = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, deform::DeformOptions{});
+  EXPECT_TRUE(reached.converged);
+  EXPECT_EQ(reached.rescue_from_quality, -1);
+}
+
 TEST(Deform, TheCrushGuardKeepsTetsFromBeingPressedFlat) {
   // A sphere to a cube presses the tets under the cube's edges and corners. The crush guard acts on
   // the tets under its ratio only, each with the weight of a tet of mean volume: with it no tet ends

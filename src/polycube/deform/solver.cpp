@@ -376,7 +376,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       if (factor_valid) {
         sys.values() = assembled;
         sys.add_diagonal(mu);
-        const auto [i1, i2] = sys.solve_pcg_pair(g, Hg, gc, Hc, opt.cg_tolerance, limit);
+        const double tolerance =
+            opt.cg_tolerance_late > 0 && step >= opt.cg_late_from_step ? opt.cg_tolerance_late : opt.cg_tolerance;
+        const auto [i1, i2] = sys.solve_pcg_pair(g, Hg, gc, Hc, tolerance, limit);
         solved = i1 > 0 && i2 > 0;
         prev_cg = last_cg;
         last_cg = solved ? std::max(i1, i2) : 0;
@@ -619,12 +621,49 @@ DeformResult deform_with_barrier_if_pressed(const MatX3d& V, const MatX4i& T, co
   return r;
 }
 
+// Volume mode: deform_with_barrier_if_pressed, then the stall rescue (DeformOptions::rescue_cg_tolerance).
+DeformResult deform_volume(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
+                           const Hooks& hooks) {
+  DeformResult r = deform_with_barrier_if_pressed(V, T, B, opt, hooks);
+  // Only a schedule that went at least two steps past the rescue's start (not one cut short by
+  // max_alpha_steps for a quick look) is run again.
+  if (r.converged || !(opt.rescue_cg_tolerance > 0) || !(opt.rescue_cg_tolerance < opt.cg_tolerance) ||
+      r.alpha_steps < opt.rescue_from_step + 2)
+    return r;
+  {
+    std::ostringstream os;
+    os << "the deformation stopped at l1_quality " << r.l1_quality << ", above the target " << opt.target_quality
+       << ": deforming again with the SQP systems solved to " << opt.rescue_cg_tolerance << " from schedule step "
+       << opt.rescue_from_step + 1 << " on";
+    hooks.info(os.str());
+  }
+  DeformOptions tight = opt;
+  tight.cg_tolerance_late = opt.rescue_cg_tolerance;
+  tight.cg_late_from_step = opt.rescue_from_step;
+  DeformResult r2 = deform_with_barrier_if_pressed(V, T, B, tight, hooks);
+  const double first_quality = r.l1_quality, seconds = r.seconds + r2.seconds;
+  const bool better = r2.inverted == 0 && r2.l1_quality < r.l1_quality;
+  {
+    std::ostringstream os;
+    os << "deformed again: l1_quality " << r2.l1_quality << " (" << r.l1_quality << " before), "
+       << (better ? "kept" : "not kept");
+    hooks.debug(os.str());
+  }
+  if (better) {
+    r = std::move(r2);
+    r.rescued = true;
+  }
+  r.rescue_from_quality = first_quality;
+  r.seconds = seconds;
+  return r;
+}
+
 }  // namespace
 
 DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
                                 const Hooks& hooks) {
   POLYCUBE_ASSERT(T.rows() > 0, "deform_to_polycube needs tets (deform_surface_to_polycube for a surface)");
-  if (!opt.locality_order) return deform_with_barrier_if_pressed(V, T, B, opt, hooks);
+  if (!opt.locality_order) return deform_volume(V, T, B, opt, hooks);
   const std::vector<int> perm = locality_permutation(V, B);
   MatX3d V2(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
@@ -638,7 +677,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX4i T2(T.rows(), 4);
   for (int t = 0; t < T.rows(); ++t)
     for (int k = 0; k < 4; ++k) T2(t, k) = perm[T(order[t], k)];
-  DeformResult r = deform_with_barrier_if_pressed(V2, T2, B, opt, hooks);  // boundary ids are unchanged
+  DeformResult r = deform_volume(V2, T2, B, opt, hooks);  // boundary ids are unchanged
   MatX3d X(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
   r.X = std::move(X);

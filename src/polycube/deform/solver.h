@@ -110,6 +110,23 @@ struct DeformOptions {
   /// counts, so that a run does not depend on the machine's load; at least cg_max_iterations).
   double cg_tolerance = 1e-2;
   int cg_max_iterations = 12;
+  /// From schedule step cg_late_from_step on (0-based), the CG tolerance is cg_tolerance_late
+  /// instead (0 = cg_tolerance throughout; set by the stall rescue below).
+  double cg_tolerance_late = 0;
+  int cg_late_from_step = 0;
+  /// Volume mode, stall rescue: when the schedule ends with l1_quality above target_quality after
+  /// at least rescue_from_step + 2 steps (not a schedule cut short for a quick look), the
+  /// deformation runs again from rest with the SQP systems solved to rescue_cg_tolerance from
+  /// schedule step rescue_from_step on, and the better result (the lower l1_quality, no tet
+  /// inverted) is kept. Late in the schedule the inexact CG directions invert tets at a small
+  /// fraction of their length, the barrier of the tets they invert is raised, and the shape
+  /// stiffens until the steps stall (blub, 52k tets: steps of 1e-3 to 1e-4 from alpha 400 on, half
+  /// the tets' barriers raised, l1_quality 1.23e-3 after the 20 steps; the directions of fresh
+  /// factorizations went 0.25-1 of their length where CG's went 0.004-0.06). Solved to 1e-4 from
+  /// alpha 12.8 on, blub reaches 9.9e-4 (208 iterations). Runs that reach the target are unchanged;
+  /// the others cost a second deformation. 0 = off.
+  double rescue_cg_tolerance = 1e-4;
+  int rescue_from_step = 8;
   /// A new factorization is also made, without trying CG, when that limit is above its floor
   /// (cg_max_iterations: the large meshes) and the last solve needed more than this fraction of it
   /// and more iterations than the one before it: the count grows as
@@ -164,6 +181,10 @@ struct DeformResult {
   double thin_crushed = 0;
   /// The same fraction at the end, over the pairs the barrier kept (0 without the barrier).
   double thin_crushed_after = 0;
+  /// Stall rescue (DeformOptions::rescue_cg_tolerance): the first run's l1_quality when it ran
+  /// (-1: not needed or off), and whether its result was kept.
+  double rescue_from_quality = -1;
+  bool rescued = false;
   bool converged = false;    ///< l1_quality reached target_quality
   double seconds = 0;
   std::vector<IterationRecord> history;

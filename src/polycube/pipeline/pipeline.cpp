@@ -502,6 +502,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"volume_barrier_weight", dr.volume_barrier_weight},
                  {"boosted_tets", dr.boosted_tets},
                  {"crushed_tets", dr.crushed_tets},
+                 {"stall_rescue", {{"ran", dr.rescue_from_quality >= 0},
+                                   {"l1_quality_before", dr.rescue_from_quality},
+                                   {"kept", dr.rescued}}},
                  {"thickness_pairs", dr.thickness_pairs},
                  {"thin_crushed", dr.thin_crushed},
                  {"thin_crushed_after", dr.thin_crushed_after}};
@@ -522,6 +525,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"volume_boost", opt.deform.volume_boost_factor},
                        {"crush_guard", opt.deform.crush_guard_weight},
                        {"crush_guard_ratio", opt.deform.crush_guard_ratio},
+                       {"rescue_cg_tolerance", opt.deform.rescue_cg_tolerance},
+                       {"rescue_from_step", opt.deform.rescue_from_step},
                        {"thickness", opt.deform.thickness_weight},
                        {"thickness_keep", opt.deform.thickness_keep},
                        {"gap_barrier", opt.deform.gap_weight},
