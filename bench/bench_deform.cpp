@@ -39,16 +39,22 @@ struct Model {
   int tets;               // target tet count (the paper's when it has the model)
 };
 
+// The tab-separated fields of one line of a TSV file.
+std::vector<std::string> tsv_fields(const std::string& line) {
+  std::vector<std::string> c;
+  std::stringstream ss(line);
+  std::string x;
+  while (std::getline(ss, x, '\t')) c.push_back(x);
+  return c;
+}
+
 // Rows of one of the paper's tables (TSV), by model name (first column); the first row of a name wins.
 std::map<std::string, std::vector<std::string>> read_paper_table(const std::string& path) {
   std::map<std::string, std::vector<std::string>> rows;
   std::ifstream in(path);
   std::string line;
   while (std::getline(in, line)) {
-    std::vector<std::string> c;
-    std::stringstream ss(line);
-    std::string x;
-    while (std::getline(ss, x, '\t')) c.push_back(x);
+    const std::vector<std::string> c = tsv_fields(line);
     if (!c.empty() && !rows.count(c[0])) rows[c[0]] = c;
   }
   return rows;
@@ -142,13 +148,8 @@ int survey(const std::string& shared, const std::vector<std::string>& only, cons
     return 0;
   }
   std::string line;
-  std::getline(index, line);  // header
-  std::vector<std::string> header;
-  {
-    std::stringstream ss(line);
-    std::string x;
-    while (std::getline(ss, x, '\t')) header.push_back(x);
-  }
+  std::getline(index, line);
+  const std::vector<std::string> header = tsv_fields(line);
   const auto column = [&](const char* name) {
     return static_cast<int>(std::find(header.begin(), header.end(), name) - header.begin());
   };
@@ -159,10 +160,7 @@ int survey(const std::string& shared, const std::vector<std::string>& only, cons
   int total = 0, met = 0;
   std::vector<std::string> missed;
   while (std::getline(index, line)) {
-    std::vector<std::string> c;
-    std::stringstream ss(line);
-    std::string x;
-    while (std::getline(ss, x, '\t')) c.push_back(x);
+    const std::vector<std::string> c = tsv_fields(line);
     if (static_cast<int>(c.size()) <= std::max({c_file, c_closed, c_faces}) || c[c_closed] != "True") continue;
     const std::string file = c[c_file];
     if (!only.empty() && std::find(only.begin(), only.end(), fs::path(file).filename().string()) == only.end()) continue;
