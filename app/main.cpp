@@ -337,6 +337,13 @@ int main(int argc, char** argv) {
                  "folded map anyway, kept only if none is inverted and they are within 5% of the bbox diagonal of "
                  "the input (no polycube.* or map.obj is written; 0 = fail instead)")
       ->capture_default_str()->check(CLI::Range(0, 1000000));
+  app.add_option("--quad-polycube", opt.quad_polycube,
+                 "Quads in volume mode (--quad without --surface): the polycube they come from. auto: the volume's, "
+                 "and when no valid polycube map of the volume is realized (and no folded map carries them), the "
+                 "deformed boundary's labels realized as a surface polycube (report polycube.surface_fallback); "
+                 "surface: that surface polycube straight away (the tet realization skipped); volume: the volume's "
+                 "only (fails with exit code 7 where it is not realized)")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "surface", "volume"}));
   app.add_flag("--write-failed", opt.write_failed,
                "When no valid polycube is realized, write the state reached to OUTDIR/failed_polycube.vtk "
                "(cell fields label and inverted) for inspection; the run still fails (exit code 7)");

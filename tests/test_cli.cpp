@@ -532,6 +532,54 @@ TEST(Cli, MeasureGivesTheHexStageFigures) {
   EXPECT_EQ(run_cli("measure " + out + "/nosuch.mesh").code, 3);
 }
 
+// Volume-mode quads from the deformed boundary's surface polycube (--quad-polycube surface; also
+// "auto"'s fallback when the volume is not realized): the volume deformed as usual, the tet
+// realization skipped, the labels realized on the boundary alone; the quads as from the volume.
+TEST(Cli, QuadsFromTheSurfacePolycubeOfTheVolumeDeformation) {
+  const std::string out = temp_dir("quad_surface_polycube");
+  RunResult r = run_cli("--example box_hole --quad --quads 400 --quad-polycube surface -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json j = report(out);
+  EXPECT_EQ(j["mode"], "volume deformation, surface polycube");
+  const json& f = j["polycube"]["surface_fallback"];
+  EXPECT_FALSE(f["volume_tried"].get<bool>()) << f.dump();
+  EXPECT_TRUE(f["success"].get<bool>()) << f.dump();
+  EXPECT_LT(j["polycube"]["l1_quality"].get<double>(), 1e-3);  // the volume's deformation
+  EXPECT_GT(j["tetmesh"]["tets"].get<int>(), 1000);
+  const json& p = j["polycube"];
+  EXPECT_EQ(p["charts"], 10);  // a box with a through-hole: 6 + 4
+  EXPECT_EQ(p["corners"], 16);
+  EXPECT_EQ(p["planarity_error"], 0.0);
+  EXPECT_EQ(p["misoriented_faces"], 0);
+  EXPECT_TRUE(p["map_valid"].get<bool>());
+  const json& q = j["quad"];
+  EXPECT_EQ(q["inverted"], 0);
+  EXPECT_NEAR(q["count"].get<double>(), 400, 60) << q.dump();
+  EXPECT_GT(q["sj_min"].get<double>(), 0.8) << q.dump();
+  EXPECT_LT(q["hausdorff_rel"].get<double>(), 0.01) << q.dump();
+  // The volume stays in tetmesh.* and deformed.* (a map of each other); the polycube is the
+  // surface's: triangles only, the labels one per input triangle.
+  const MeshData tmesh = io::read_mesh(out + "/tetmesh.mesh");
+  const MeshData dmesh = io::read_mesh(out + "/deformed.mesh");
+  const MeshData pmesh = io::read_mesh(out + "/polycube.mesh");
+  const MeshData smesh = io::read_mesh(out + "/surface.mesh");
+  EXPECT_EQ(tmesh.T.rows(), j["tetmesh"]["tets"].get<int>());
+  EXPECT_EQ(dmesh.T.rows(), tmesh.T.rows());
+  EXPECT_EQ(pmesh.T.rows(), 0);
+  EXPECT_EQ(pmesh.F.rows(), smesh.F.rows());
+  EXPECT_EQ(static_cast<int>(read_labels(out + "/labels.txt").size()), smesh.F.rows());
+  EXPECT_TRUE(fs::exists(out + "/map.obj"));
+  // The default (auto) realizes this volume: no fallback, the quads from the volume's polycube.
+  r = run_cli("--example box_hole --quad --quads 400 -o " + out + "_auto");
+  ASSERT_EQ(r.code, 0) << r.output;
+  const json a = report(out + "_auto");
+  EXPECT_EQ(a["mode"], "volume");
+  EXPECT_FALSE(a["polycube"].contains("surface_fallback"));
+  EXPECT_GT(io::read_mesh(out + "_auto/polycube.mesh").T.rows(), 0);
+  // Anything else is refused.
+  EXPECT_EQ(run_cli("--example box_hole --quad --quad-polycube tets -o " + out + "_bad").code, 2);
+}
+
 TEST(Cli, QuadMeshOfTheSphere) {
   const std::string out = temp_dir("quad_sphere");
   RunResult r = run_cli("--example sphere --quad -o " + out);

@@ -204,6 +204,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     report["mode"] = opt.surface ? "surface" : "volume";
     if (opt.surface && opt.until == Stage::Hex)
       throw Error(ErrorKind::Usage, "hex meshes need the volume: drop --surface (surface mode builds quads)");
+    if (opt.quad_polycube != "auto" && opt.quad_polycube != "surface" && opt.quad_polycube != "volume")
+      throw Error(ErrorKind::Usage, "quad polycube must be auto, surface or volume, not '" + opt.quad_polycube + "'");
     if (!opt.surface && opt.polycube.realize.relax_iterations > 0)
       throw Error(ErrorKind::Usage, "--relax relaxes the surface polycube map: it needs --surface");
     if (!opt.example.empty()) report["input"]["example"] = opt.example;
@@ -605,8 +607,15 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       Stopwatch sp;
       hooks.report("polycube", 0);
       hooks.info("extracting the polycube");
-      chart::PolycubeExtraction ex =
-          given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+      // Volume-mode quads from the deformed boundary's surface polycube straight away
+      // (PipelineOptions::quad_polycube "surface"): the volume is not realized.
+      const bool surface_polycube_only =
+          !opt.surface && !given_map && opt.until == Stage::Quad && opt.quad_polycube == "surface";
+      chart::PolycubeExtraction ex;
+      if (surface_polycube_only)
+        ex.realized.failure = "not realized (--quad-polycube surface)";
+      else
+        ex = given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
       if (ex.corner_split_retry.tried) {
         const chart::CornerSplitRetry& c = ex.corner_split_retry;
         report["polycube"]["corner_split_retry"] = {
@@ -627,12 +636,61 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
         report["polycube"]["retry"] = {{"reason", first}, {"barrier_weight", w}};
       }
+      // Volume-mode quads without a volume map (PipelineOptions::quad_surface_fallback): the labels
+      // cleaned and realized again on the deformed boundary alone; from here on the run is in surface
+      // mode (tm: that boundary, no tets), and deformed.vtk keeps the volume with its labels.
+      bool surface_mode = opt.surface;
+      bool deformed_written = false;
+      if (surface_polycube_only ||
+          (!opt.surface && opt.until == Stage::Quad && opt.quad_polycube == "auto" && !given_map && input_closed &&
+           !ex.realized.success && !(chart::is_folded(ex.realized) && ex.realized.inverted <= opt.hex_through_folds))) {
+        const std::string reason = ex.realized.failure;
+        if (surface_polycube_only)
+          hooks.info("realizing the polycube of the deformed boundary alone for the quads (--quad-polycube surface)");
+        else
+          hooks.warn("no valid polycube map of the volume (" + reason +
+                     "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here)");
+        if (!given_deformed) {
+          io::CellFields df;
+          df["label"] = ex.labels;
+          df["label"].resize(tm.boundary.rows() + tm.T.rows(), -1);
+          write_deformed_vtk(df);
+          deformed_written = true;
+        }
+        std::vector<int> kept;
+        const SurfaceMesh bs = compact_surface(tm.V, tm.boundary, &kept);
+        MatX3d Xs(bs.V.rows(), 3);
+        for (int i = 0; i < bs.V.rows(); ++i) Xs.row(i) = dr.X.row(kept[i]);
+        const Stopwatch sf;
+        chart::PolycubeExtraction sx = chart::extract_polycube(bs.V, MatX4i(0, 4), bs.F, Xs, opt.polycube, hooks);
+        report["polycube"]["surface_fallback"] = {{"volume_failure", reason},
+                                                  {"volume_tried", !surface_polycube_only},
+                                                  {"success", sx.realized.success},
+                                                  {"seconds", sf.seconds()}};
+        if (!surface_polycube_only)
+          report["polycube"]["surface_fallback"].update({{"volume_inverted", ex.realized.inverted},
+                                                         {"volume_charts", ex.charts.charts},
+                                                         {"volume_corners", ex.charts.corners}});
+        if (!sx.realized.success)
+          throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + reason +
+                                               "; nor on the deformed boundary alone: " + sx.realized.failure);
+        std::vector<int> to_surface(tm.V.rows(), -1);
+        for (size_t i = 0; i < kept.size(); ++i) to_surface[kept[i]] = static_cast<int>(i);
+        for (int& v : surf_to_tet) v = v >= 0 ? to_surface[v] : -1;
+        tm.V = bs.V;
+        tm.T.resize(0, 4);
+        tm.boundary = bs.F;
+        dr.X = Xs;
+        ex = std::move(sx);
+        surface_mode = true;
+        report["mode"] = "volume deformation, surface polycube";
+      }
       // Surface quads are extracted here, before the polycube is written: when the extraction holds
       // two polycubes (another start's, PolycubeExtraction::alternative), the one whose quads are
       // better is kept and written (quad::surface_quads_best_start).
       std::vector<quad::StartQuads> surface_quads;
       double surface_quad_seconds = 0;
-      if (opt.surface && opt.until == Stage::Quad && ex.realized.success) {
+      if (surface_mode && opt.until == Stage::Quad && ex.realized.success) {
         const Stopwatch sq;
         hooks.info("extracting the quad mesh from the surface polycube");
         const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
@@ -663,7 +721,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       json& pj = report["polycube"];
       if (!given_map) {
         pj["deformed_arap_distortion"] = dr.arap;
-        const chart::Distortion di = opt.surface ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
+        const chart::Distortion di = surface_mode ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
                                                  : chart::isometric_distortion(tm.V, dr.X, tm.T);
         pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
       }
@@ -730,7 +788,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // Hexes (or volume-mode quads) asked for and no polycube: the realization's best state may
       // still carry them when it is on the planes with a few tets inverted
       // (PipelineOptions::hex_through_folds).
-      const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !opt.surface &&
+      const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !surface_mode &&
                               chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
       if (!rr.success && !folded_map) {
         std::string where =
@@ -782,11 +840,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       pj["inverted_tets"] = rr.inverted;
       pj["planarity_error"] = rr.planarity_error;
       pj["misoriented_faces"] = rr.misoriented_faces;
-      if (!opt.surface)
+      if (!surface_mode)
         pj["edge_order"] = {{"vertices", ex.edge_order.vertices},
                             {"out_of_order", ex.edge_order.out_of_order},
                             {"past_corner", ex.edge_order.past_corner}};
-      if (opt.surface) pj["edge_flips"] = ex.edge_flips;
+      if (surface_mode) pj["edge_flips"] = ex.edge_flips;
       pj["edge_collapses"] = ex.edge_collapses;
       pj["collapse_edge_splits"] = ex.collapse_edge_splits;
       pj["isometric_distortion"] = {{"min", rr.isometric.min},
@@ -795,7 +853,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                     {"nearly_flat", rr.isometric.nearly_flat}};
       if (rr.isometric.nearly_flat > 0 && !folded_map)
         hooks.warn("the polycube map is nearly degenerate at " + std::to_string(rr.isometric.nearly_flat) +
-                   (opt.surface ? " triangles" : " tets") + " (isometric distortion above " +
+                   (surface_mode ? " triangles" : " tets") + " (isometric distortion above " +
                    std::to_string(static_cast<int>(chart::kNearlyFlat)) + ", max " + std::to_string(rr.isometric.max) +
                    "): valid, but elements mapped through them are crushed");
       if (input_closed) {
@@ -868,7 +926,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       io::CellFields df;
       df["label"] = ex.labels;
       df["label"].resize(B.rows() + tm.T.rows(), -1);
-      if (!given_map && !given_deformed) write_deformed_vtk(df);
+      if (!given_map && !given_deformed && !deformed_written) write_deformed_vtk(df);
       if (!folded_map) {
         const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
         io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
@@ -876,9 +934,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
       // Labels on the input surface and the deformed mesh too.
       io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
-      if (rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) {
+      if ((rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) &&
+          !(surface_mode && !opt.surface)) {
         // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
-        // tetmesh.* and polycube.* stay a map.
+        // tetmesh.* and polycube.* stay a map. (Not after the surface fallback: tetmesh.* stays
+        // the volume that deformed.* deforms; the surface map is map.obj.)
         MeshData tmo;
         tmo.V = rr.rest;
         tmo.T = rr.T;
@@ -991,9 +1051,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         // loses them; the volume's does not (humanoid, 2000 quads: Hausdorff 141e-3 in surface mode,
         // 8.8e-3 through the volume).
         warn_if_far(hooks, hd, box.diagonal().norm(), "quad mesh",
-                    opt.surface && input_closed ? "; the volume pipeline (--quad without --surface) keeps the parts the "
-                                                  "surface mode's layout loses, where its polycube is realized"
-                                                : "");
+                    opt.surface && input_closed
+                        ? "; the volume pipeline (--quad without --surface) keeps the parts the surface mode's layout "
+                          "loses (with --quad-polycube surface, its deformed boundary gives the quads without a tet "
+                          "realization)"
+                        : "");
         warn_if_slivers(hooks, qr.quality, "quads");
         hooks.report("quad", 1);
       };
@@ -1102,7 +1164,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
 
       // ---- quad -------------------------------------------------------------------------
-      if (opt.until == Stage::Quad && opt.surface) {
+      if (opt.until == Stage::Quad && surface_mode) {
         Stopwatch sq;
         hooks.report("quad", 0);
         const auto kept = std::find_if(surface_quads.begin(), surface_quads.end(),
@@ -1130,7 +1192,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                     json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices},
                          {"thin_step_retries", retries}});
       }
-      if (opt.until == Stage::Quad && !opt.surface) {
+      if (opt.until == Stage::Quad && !surface_mode) {
         Stopwatch sq;
         hooks.report("quad", 0);
         hooks.info("extracting the quad mesh of the surface");

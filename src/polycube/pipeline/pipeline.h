@@ -55,6 +55,18 @@ struct PipelineOptions {
   /// Hausdorff 4.5e-3 of the diagonal; homer (2 inverted, the state overlapping itself widely) and
   /// octopus-low (its best state crushed) still fail.
   int hex_through_folds = 100;
+  /// Volume mode with Stage::Quad, the polycube the quads come from: "auto" (default) the volume's
+  /// (the tet mesh realized, chart::extract_polycube), and when no valid polycube map of the volume
+  /// is realized and no folded map can carry the quads (see hex_through_folds), the labels cleaned
+  /// and realized again on the deformed boundary alone, as in surface mode
+  /// (chart::realize_surface_polycube: no tets to invert), the quads then coming from that surface
+  /// polycube as with `surface`; "surface": that surface polycube straight away (no tet
+  /// realization, which can take minutes before it fails); "volume": the volume's only (such runs
+  /// fail with exit code 7). The volume deformation keeps thin parts (fins, limbs) that the
+  /// surface ARAP presses flat, so the layout keeps them too. report.json:
+  /// polycube.surface_fallback; polycube.* is then the surface polycube (no tets), tetmesh.* and
+  /// deformed.* the volume deformed.
+  std::string quad_polycube = "auto";
   /// Volume mode: when no valid polycube is realized (and no hexes come through a folded map),
   /// write the state the realization reached to OUTDIR/failed_polycube.vtk for inspection: its
   /// tets and boundary triangles, cell fields `label` (triangles, -1 on tets) and `inverted` (1 on
