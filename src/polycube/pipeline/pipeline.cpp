@@ -649,7 +649,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           hooks.info("realizing the polycube of the deformed boundary alone for the quads (--quad-polycube surface)");
         else
           hooks.warn("no valid polycube map of the volume (" + reason +
-                     "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here)");
+                     "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here; "
+                     "--quad-polycube surface goes there without trying the volume)");
         if (!given_deformed) {
           io::CellFields df;
           df["label"] = ex.labels;
