@@ -822,7 +822,13 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                       " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order.example +
                       "), where chart borders run on past their corners"
                 : std::string();
-        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where);
+        // Volume mode short of quads: quads of the surface need no volume map (quad_polycube).
+        const std::string quads_hint =
+            !opt.surface && !given_map && opt.until != Stage::Quad && input_closed
+                ? "; quads of the surface are still possible: --quad (its fallback realizes the deformed boundary "
+                  "alone as a surface polycube; --quad-polycube surface goes there at once)"
+                : "";
+        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where + quads_hint);
       }
       pj["map_valid"] = rr.success;
       if (folded_map) {
