@@ -339,7 +339,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 1000000));
   app.add_option("--quad-polycube", opt.quad_polycube,
                  "Quads in volume mode (--quad without --surface): the polycube they come from. auto: the volume's, "
-                 "and when no valid polycube map of the volume is realized (and no folded map carries them), the "
+                 "and when no valid polycube map of the volume is realized (and no folded map carries them, or its quads are "
+                 "refused), the "
                  "deformed boundary's labels realized as a surface polycube (report polycube.surface_fallback); "
                  "surface: that surface polycube straight away (the tet realization skipped); volume: the volume's "
                  "only (fails with exit code 7 where it is not realized)")

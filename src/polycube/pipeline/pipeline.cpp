@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <map>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <cmath>
 
@@ -604,632 +605,669 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
 
     // ---- polycube -----------------------------------------------------------------------
     if (static_cast<int>(opt.until) >= static_cast<int>(Stage::Polycube)) {
-      Stopwatch sp;
-      hooks.report("polycube", 0);
-      hooks.info("extracting the polycube");
-      // Volume-mode quads from the deformed boundary's surface polycube straight away
-      // (PipelineOptions::quad_polycube "surface"): the volume is not realized.
-      const bool surface_polycube_only =
-          !opt.surface && !given_map && opt.until == Stage::Quad && opt.quad_polycube == "surface";
-      chart::PolycubeExtraction ex;
-      if (surface_polycube_only)
-        ex.realized.failure = "not realized (--quad-polycube surface)";
-      else
-        ex = given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
-      if (ex.corner_split_retry.tried) {
-        const chart::CornerSplitRetry& c = ex.corner_split_retry;
-        report["polycube"]["corner_split_retry"] = {
-            {"reason", c.reason}, {"success", c.success}, {"inverted", c.inverted}, {"kept", c.kept}};
-      }
-      if (given_map) report["polycube"]["source"] = opt.polycube_map;
-      if (!ex.realized.success && opt.surface && opt.surface_retry_barrier > 1) {
-        // Surface mode: nothing but the anti-foldover barrier keeps the surface from folding into
-        // thin fins (triangles of opposite normals pressed together at a corner), which no
-        // polycube realizes; deform again with a stronger barrier (rocker, before the collapse
-        // rounds: 3 folds left at 0.01, an exact polycube at 0.1; not the default because spot
-        // fails at 0.1).
-        const double w = opt.deform.barrier_weight * opt.surface_retry_barrier;
-        const std::string first = ex.realized.failure;
-        hooks.warn("no valid polycube (" + first + "); deforming again with the anti-foldover barrier at " +
-                   std::to_string(w));
-        run_deform(w);
-        ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
-        report["polycube"]["retry"] = {{"reason", first}, {"barrier_weight", w}};
-      }
-      // Volume-mode quads without a volume map (PipelineOptions::quad_surface_fallback): the labels
-      // cleaned and realized again on the deformed boundary alone; from here on the run is in surface
-      // mode (tm: that boundary, no tets), and deformed.vtk keeps the volume with its labels.
-      bool surface_mode = opt.surface;
-      bool deformed_written = false;
-      if (surface_polycube_only ||
-          (!opt.surface && opt.until == Stage::Quad && opt.quad_polycube == "auto" && !given_map && input_closed &&
-           !ex.realized.success && !(chart::is_folded(ex.realized) && ex.realized.inverted <= opt.hex_through_folds))) {
-        const std::string reason = ex.realized.failure;
-        if (surface_polycube_only)
-          hooks.info("realizing the polycube of the deformed boundary alone for the quads (--quad-polycube surface)");
+      // Volume-mode quads (PipelineOptions::quad_polycube "auto"): when the quads through a folded
+      // map are refused (a map that overlaps itself: the grid fills a gap, or parts are missing), the
+      // stage runs again from the same volume extraction with the deformed boundary's surface polycube.
+      std::optional<chart::PolycubeExtraction> volume_extraction;
+      std::string folded_refusal;  // set on the second pass
+      bool folded_quads = false;
+      auto polycube_stage = [&] {
+        Stopwatch sp;
+        hooks.report("polycube", 0);
+        hooks.info("extracting the polycube");
+        // Volume-mode quads from the deformed boundary's surface polycube straight away
+        // (PipelineOptions::quad_polycube "surface"): the volume is not realized.
+        const bool surface_polycube_only =
+            !opt.surface && !given_map && opt.until == Stage::Quad && opt.quad_polycube == "surface";
+        chart::PolycubeExtraction ex;
+        if (!folded_refusal.empty())
+          ex = std::move(*volume_extraction);  // the second pass (see polycube_stage)
+        else if (surface_polycube_only)
+          ex.realized.failure = "not realized (--quad-polycube surface)";
         else
-          hooks.warn("no valid polycube map of the volume (" + reason +
-                     "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here; "
-                     "--quad-polycube surface goes there without trying the volume)");
-        if (!given_deformed) {
-          io::CellFields df;
-          df["label"] = ex.labels;
-          df["label"].resize(tm.boundary.rows() + tm.T.rows(), -1);
-          write_deformed_vtk(df);
-          deformed_written = true;
+          ex = given_map ? read_given_map() : chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+        if (ex.corner_split_retry.tried) {
+          const chart::CornerSplitRetry& c = ex.corner_split_retry;
+          report["polycube"]["corner_split_retry"] = {
+              {"reason", c.reason}, {"success", c.success}, {"inverted", c.inverted}, {"kept", c.kept}};
         }
-        std::vector<int> kept;
-        const SurfaceMesh bs = compact_surface(tm.V, tm.boundary, &kept);
-        MatX3d Xs(bs.V.rows(), 3);
-        for (int i = 0; i < bs.V.rows(); ++i) Xs.row(i) = dr.X.row(kept[i]);
-        const Stopwatch sf;
-        chart::PolycubeExtraction sx = chart::extract_polycube(bs.V, MatX4i(0, 4), bs.F, Xs, opt.polycube, hooks);
-        report["polycube"]["surface_fallback"] = {{"volume_failure", reason},
-                                                  {"volume_tried", !surface_polycube_only},
-                                                  {"success", sx.realized.success},
-                                                  {"seconds", sf.seconds()}};
-        if (!surface_polycube_only)
-          report["polycube"]["surface_fallback"].update({{"volume_inverted", ex.realized.inverted},
-                                                         {"volume_charts", ex.charts.charts},
-                                                         {"volume_corners", ex.charts.corners}});
-        if (!sx.realized.success)
-          throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + reason +
-                                               "; nor on the deformed boundary alone: " + sx.realized.failure);
-        std::vector<int> to_surface(tm.V.rows(), -1);
-        for (size_t i = 0; i < kept.size(); ++i) to_surface[kept[i]] = static_cast<int>(i);
-        for (int& v : surf_to_tet) v = v >= 0 ? to_surface[v] : -1;
-        tm.V = bs.V;
-        tm.T.resize(0, 4);
-        tm.boundary = bs.F;
-        dr.X = Xs;
-        ex = std::move(sx);
-        surface_mode = true;
-        report["mode"] = "volume deformation, surface polycube";
-      }
-      // Surface quads are extracted here, before the polycube is written: when the extraction holds
-      // two polycubes (another start's, PolycubeExtraction::alternative), the one whose quads are
-      // better is kept and written (quad::surface_quads_best_start).
-      std::vector<quad::StartQuads> surface_quads;
-      double surface_quad_seconds = 0;
-      if (surface_mode && opt.until == Stage::Quad && ex.realized.success) {
-        const Stopwatch sq;
-        hooks.info("extracting the quad mesh from the surface polycube");
-        const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
-        surface_quads = quad::surface_quads_best_start(ex, tm.V, tm.boundary, target, surface, opt.quad, hooks);
-        if (surface_quads.size() > 1) {
-          json compared = json::array();
+        if (given_map) report["polycube"]["source"] = opt.polycube_map;
+        if (!ex.realized.success && opt.surface && opt.surface_retry_barrier > 1) {
+          // Surface mode: nothing but the anti-foldover barrier keeps the surface from folding into
+          // thin fins (triangles of opposite normals pressed together at a corner), which no
+          // polycube realizes; deform again with a stronger barrier (rocker, before the collapse
+          // rounds: 3 folds left at 0.01, an exact polycube at 0.1; not the default because spot
+          // fails at 0.1).
+          const double w = opt.deform.barrier_weight * opt.surface_retry_barrier;
+          const std::string first = ex.realized.failure;
+          hooks.warn("no valid polycube (" + first + "); deforming again with the anti-foldover barrier at " +
+                     std::to_string(w));
+          run_deform(w);
+          ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
+          report["polycube"]["retry"] = {{"reason", first}, {"barrier_weight", w}};
+        }
+        // Volume-mode quads without a volume map (PipelineOptions::quad_surface_fallback): the labels
+        // cleaned and realized again on the deformed boundary alone; from here on the run is in surface
+        // mode (tm: that boundary, no tets), and deformed.vtk keeps the volume with its labels.
+        bool surface_mode = opt.surface;
+        bool deformed_written = false;
+        const bool fallback_allowed =
+            !opt.surface && opt.until == Stage::Quad && opt.quad_polycube == "auto" && !given_map && input_closed;
+        const bool folded_within = chart::is_folded(ex.realized) && ex.realized.inverted <= opt.hex_through_folds;
+        if (fallback_allowed && !ex.realized.success && folded_within && folded_refusal.empty())
+          volume_extraction = ex;  // for the second pass, should the quads through the folds be refused
+        if (surface_polycube_only || !folded_refusal.empty() ||
+            (fallback_allowed && !ex.realized.success && !folded_within)) {
+          const std::string reason = ex.realized.failure;
+          if (surface_polycube_only)
+            hooks.info("realizing the polycube of the deformed boundary alone for the quads (--quad-polycube surface)");
+          else
+            hooks.warn("no valid polycube map of the volume (" + reason +
+                       "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here; "
+                       "--quad-polycube surface goes there without trying the volume)");
+          if (!given_deformed) {
+            io::CellFields df;
+            df["label"] = ex.labels;
+            df["label"].resize(tm.boundary.rows() + tm.T.rows(), -1);
+            write_deformed_vtk(df);
+            deformed_written = true;
+          }
+          if (!folded_refusal.empty()) {
+            // The first pass may have rewritten tetmesh.* with the realization's splits and
+            // collapses: back to the volume that deformed.* deforms.
+            MeshData tmo;
+            tmo.V = tm.V;
+            tmo.T = tm.T;
+            tmo.F = tm.boundary;
+            write_mesh("tetmesh", tmo);
+            report["tetmesh"]["vertices"] = tm.V.rows();
+            report["tetmesh"]["tets"] = tm.T.rows();
+            for (const char* k : {"realization_edges_split", "realization_faces_split"}) report["tetmesh"].erase(k);
+          }
+          std::vector<int> kept;
+          const SurfaceMesh bs = compact_surface(tm.V, tm.boundary, &kept);
+          MatX3d Xs(bs.V.rows(), 3);
+          for (int i = 0; i < bs.V.rows(); ++i) Xs.row(i) = dr.X.row(kept[i]);
+          const Stopwatch sf;
+          chart::PolycubeExtraction sx = chart::extract_polycube(bs.V, MatX4i(0, 4), bs.F, Xs, opt.polycube, hooks);
+          report["polycube"]["surface_fallback"] = {{"volume_failure", reason},
+                                                    {"volume_tried", !surface_polycube_only},
+                                                    {"success", sx.realized.success},
+                                                    {"seconds", sf.seconds()}};
+          if (!folded_refusal.empty()) report["polycube"]["surface_fallback"]["folded_quads_refused"] = folded_refusal;
+          if (!surface_polycube_only)
+            report["polycube"]["surface_fallback"].update({{"volume_inverted", ex.realized.inverted},
+                                                           {"volume_charts", ex.charts.charts},
+                                                           {"volume_corners", ex.charts.corners}});
+          if (!sx.realized.success)
+            throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + reason +
+                                                 "; nor on the deformed boundary alone: " + sx.realized.failure);
+          std::vector<int> to_surface(tm.V.rows(), -1);
+          for (size_t i = 0; i < kept.size(); ++i) to_surface[kept[i]] = static_cast<int>(i);
+          for (int& v : surf_to_tet) v = v >= 0 ? to_surface[v] : -1;
+          tm.V = bs.V;
+          tm.T.resize(0, 4);
+          tm.boundary = bs.F;
+          dr.X = Xs;
+          ex = std::move(sx);
+          surface_mode = true;
+          report["mode"] = "volume deformation, surface polycube";
+        }
+        // Surface quads are extracted here, before the polycube is written: when the extraction holds
+        // two polycubes (another start's, PolycubeExtraction::alternative), the one whose quads are
+        // better is kept and written (quad::surface_quads_best_start).
+        std::vector<quad::StartQuads> surface_quads;
+        double surface_quad_seconds = 0;
+        if (surface_mode && opt.until == Stage::Quad && ex.realized.success) {
+          const Stopwatch sq;
+          hooks.info("extracting the quad mesh from the surface polycube");
+          const int target = opt.target_quads > 0 ? opt.target_quads : 2000;
+          surface_quads = quad::surface_quads_best_start(ex, tm.V, tm.boundary, target, surface, opt.quad, hooks);
+          if (surface_quads.size() > 1) {
+            json compared = json::array();
+            Eigen::AlignedBox3d box;
+            for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+            for (const quad::StartQuads& c : surface_quads)
+              compared.push_back({{"start", c.start},
+                                  {"polycube_arap", c.polycube_arap},
+                                  {"quads", c.quads.quality.count},
+                                  {"sj_min", c.quads.quality.sj_min},
+                                  {"sj_mean", c.quads.quality.sj_mean},
+                                  {"inverted", c.quads.quality.inverted},
+                                  {"hausdorff_rel", c.distance.max / box.diagonal().norm()},
+                                  {"kept", c.kept}});
+            report["polycube"]["starts_compared"] = compared;
+          }
+          if (surface_quads.size() > 1 && surface_quads[1].kept) {
+            hooks.info("the " + surface_quads[1].start + " start's polycube gives the better quads: kept");
+            chart::PolycubeExtraction alternative = *ex.alternative;
+            ex = std::move(alternative);
+          }
+          surface_quad_seconds = sq.seconds();
+        }
+        const chart::RealizeResult& rr = ex.realized;
+        json& pj = report["polycube"];
+        if (!given_map) {
+          pj["deformed_arap_distortion"] = dr.arap;
+          const chart::Distortion di = surface_mode ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
+                                                   : chart::isometric_distortion(tm.V, dr.X, tm.T);
+          pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
+        }
+        pj["charts"] = ex.charts.charts;
+        pj["corners"] = ex.charts.corners;
+        pj["chart_edges"] = ex.charts.chart_edges;
+        json valence = json::object();
+        for (size_t k = 3; k < ex.charts.corner_valence.size(); ++k)
+          if (ex.charts.corner_valence[k]) valence[std::to_string(k)] = ex.charts.corner_valence[k];
+        pj["corner_valence"] = valence;
+        pj["initial_charts"] = ex.initial_charts;
+        pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
+                         {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
+                         {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite}, {"rims", ex.cleanup.rims}, {"pinches", ex.cleanup.pinches},
+                         {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
+                         {"relabelled_faces", ex.cleanup.relabelled_faces},
+                         {"collapsed_ratio", opt.polycube.collapsed_ratio},
+                         {"pinch_above", ex.cleanup.pinch_above},
+                         {"max_pinches", opt.polycube.cleanup.max_pinches}};
+        pj["realize_options"] = {{"start", opt.polycube.realize.start},
+                                 {"corner_splits", opt.polycube.corner_splits},
+                                 {"eq17_budget", opt.polycube.realize.eq17_budget},
+                                 {"untangle_patience", opt.polycube.realize.untangle_patience},
+                                 {"local_first", opt.polycube.realize.local_first},
+                                 {"surface_untangle_rounds", opt.polycube.realize.surface_untangle_rounds},
+                                 {"relax_iterations", opt.polycube.realize.relax_iterations},
+                                 {"continuation_retries", opt.polycube.realize.continuation_retries},
+                                 {"stall_repeats", opt.polycube.realize.stall_repeats},
+                                 {"penalty_path", opt.polycube.realize.penalty_path}};
+        if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
+          // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
+          // axes (a polycube edge), a flat one when they share the label.
+          std::vector<int> ok(user.size(), 0);
+          int all_ok = 0;
+          for (size_t t = 0; t < mapped.terms.size(); ++t) {
+            const auto& pr = pairs[mapped.terms[t].pair];
+            const int lf = ex.labels[pr.f], lg = ex.labels[pr.g];
+            const bool sat = mapped.terms[t].sharp ? lf / 2 != lg / 2 : lf == lg;
+            ok[mapped.owner[t]] += sat;
+            all_ok += sat;
+          }
+          auto& per = report["constraints"]["per_constraint"];
+          for (size_t i = 0; i < user.size(); ++i)
+            if (per[i]["edges"].get<int>() > 0) per[i]["polycube_satisfied"] = ok[i] / per[i]["edges"].get<double>();
+          report["constraints"]["polycube_satisfied"] = all_ok / static_cast<double>(mapped.terms.size());
+        }
+        pj["chart_graph"] = {{"valid", ex.charts.valid},
+                             {"opposite_adjacent", ex.charts.opposite_adjacent},
+                             {"high_valence_corners", ex.charts.high_valence_corners},
+                             {"non_disk_charts", ex.charts.non_disk_charts},
+                             {"invalid_topology_charts", ex.charts.invalid_topology_charts},
+                             {"loops_with_few_corners", ex.charts.loops_with_few_corners},
+                             {"coincident_corners", ex.charts.coincident_corners},
+                             {"problems", ex.charts.problems}};
+        pj["realization"] = {{"success", rr.success},
+                             {"start", rr.start},
+                             {"split_edges", rr.split_edges},
+                             {"split_faces", rr.split_faces},
+                             {"untangle_iterations", rr.untangle_iterations},
+                             {"arap_iterations", rr.iterations},
+                             {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
+                             {"seconds", rr.seconds}};
+        if (!rr.success) pj["realization"]["failure"] = rr.failure;
+        // Hexes (or volume-mode quads) asked for and no polycube: the realization's best state may
+        // still carry them when it is on the planes with a few tets inverted
+        // (PipelineOptions::hex_through_folds).
+        const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !surface_mode &&
+                                chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
+        folded_quads = folded_map && opt.until == Stage::Quad;
+        if (!rr.success && !folded_map) {
+          std::string where =
+              " (rerun with --write-failed, PipelineOptions::write_failed, to get the state reached in "
+              "OUTDIR/failed_polycube.vtk)";
+          if (opt.write_failed && rr.X.rows() > 0 && rr.T.rows() > 0) {
+            // A diagnosis, not a result: written straight into the output folder under its own name
+            // (the staged outputs are dropped on failure), through a temporary file.
+            const fs::path tmp = out / "failed_polycube.vtk.tmp", dst = out / "failed_polycube.vtk";
+            std::error_code ec;
+            try {  // the realization's failure stays the error reported, whatever happens here
+              write_failed_polycube(tmp.string(), rr.rest, rr.X, rr.T, ex.map_triangles(tm.boundary),
+                                    ex.map_triangle_labels(), opt.vtk_binary);
+              fs::rename(tmp, dst, ec);
+              where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
+                         : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
+            } catch (const Error& e) {
+              ec = std::make_error_code(std::errc::io_error);
+              where = std::string(" (failed_polycube.vtk could not be written: ") + e.what() + ")";
+            }
+            if (ec) fs::remove(tmp, ec);
+          } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
+            where.clear();  // failed before any state: nothing to show
+          }
+          // Vertices of polycube edges past a corner (see chart::EdgeOrder): where chart borders run
+          // on past their corners, which the realization cannot undo without flattening tets.
+          const std::string order =
+              ex.edge_order.past_corner > 0
+                  ? "; the deformed mesh has " + std::to_string(ex.edge_order.past_corner) +
+                        " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order.example +
+                        "), where chart borders run on past their corners"
+                  : std::string();
+          // Volume mode short of quads: quads of the surface need no volume map (quad_polycube).
+          const std::string quads_hint =
+              !opt.surface && !given_map && opt.until != Stage::Quad && input_closed
+                  ? "; quads of the surface are still possible: --quad (its fallback realizes the deformed boundary "
+                    "alone as a surface polycube; --quad-polycube surface goes there at once)"
+                  : "";
+          throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where + quads_hint);
+        }
+        pj["map_valid"] = rr.success;
+        if (folded_map) {
+          // Its figures, which the realization leaves unset on failure (over every tet, the inverted
+          // ones by their singular values).
+          ex.realized.arap = deform::arap_energy(rr.X, rr.T, deform::ArapRest::build(rr.rest, rr.T), 1.0, nullptr, nullptr);
+          ex.realized.isometric = chart::isometric_distortion(rr.rest, rr.X, rr.T);
+          hooks.warn((given_map ? "the polycube map given is folded (" + rr.failure + ")"
+                                : "no valid polycube could be realized (" + rr.failure + "); its best state is on the "
+                                  "planes with " + std::to_string(rr.inverted) + " tets inverted") +
+                     ": extracting the " + std::string(opt.until == Stage::Hex ? "hexes" : "quads") +
+                     " through that folded map (polycube.* and map.obj are not written; "
+                     "--hex-through-folds 0 turns this off)");
+        }
+        pj["arap_distortion"] = rr.arap;
+        pj["inverted_tets"] = rr.inverted;
+        pj["planarity_error"] = rr.planarity_error;
+        pj["misoriented_faces"] = rr.misoriented_faces;
+        if (!surface_mode)
+          pj["edge_order"] = {{"vertices", ex.edge_order.vertices},
+                              {"out_of_order", ex.edge_order.out_of_order},
+                              {"past_corner", ex.edge_order.past_corner}};
+        if (surface_mode) pj["edge_flips"] = ex.edge_flips;
+        pj["edge_collapses"] = ex.edge_collapses;
+        pj["collapse_edge_splits"] = ex.collapse_edge_splits;
+        pj["isometric_distortion"] = {{"min", rr.isometric.min},
+                                      {"mean", rr.isometric.mean},
+                                      {"max", rr.isometric.max},
+                                      {"nearly_flat", rr.isometric.nearly_flat}};
+        if (rr.isometric.nearly_flat > 0 && !folded_map)
+          hooks.warn("the polycube map is nearly degenerate at " + std::to_string(rr.isometric.nearly_flat) +
+                     (surface_mode ? " triangles" : " tets") + " (isometric distortion above " +
+                     std::to_string(static_cast<int>(chart::kNearlyFlat)) + ", max " + std::to_string(rr.isometric.max) +
+                     "): valid, but elements mapped through them are crushed");
+        if (input_closed) {
+          // Every tet positive does not make the polycube embedded: count lines meeting two faces of
+          // the same orientation in a row (the polycube overlaps itself there).
+          const std::array<int, 3> o = hex::overlap_lines(rr.X, ex.map_triangles(tm.boundary), ex.map_triangle_labels());
+          pj["self_overlap_lines"] = {o[0], o[1], o[2]};
+          if (o[0] + o[1] + o[2] > 0)
+            hooks.warn("the polycube overlaps itself (" + std::to_string(o[0] + o[1] + o[2]) +
+                       " sample lines meet two faces of the same orientation in a row): it is not embedded");
+        }
+        if (!ex.charts.valid)
+          hooks.warn("the polycube is exact and has no inverted tet, but its chart graph has problems: " +
+                     (ex.charts.problems.empty() ? std::string("see report.json") : ex.charts.problems.front()));
+
+        // Labels of the input triangles and polycube positions of the input vertices.
+        const MatX3i& B = tm.boundary;
+        // The polycube's triangles: B, or in surface mode B with folded triangles' edges flipped or
+        // collapsed (PL: their labels).
+        const MatX3i& PB = ex.map_triangles(B);
+        const std::vector<int>& PL = ex.map_triangle_labels();
+        bool direct = static_cast<int>(surf_to_tet.size()) == surface.V.rows() && B.rows() == surface.F.rows();
+        for (int f = 0; direct && f < B.rows(); ++f) {
+          std::array<int, 3> a{surf_to_tet[surface.F(f, 0)], surf_to_tet[surface.F(f, 1)], surf_to_tet[surface.F(f, 2)]};
+          std::array<int, 3> b{B(f, 0), B(f, 1), B(f, 2)};
+          std::sort(a.begin(), a.end());
+          std::sort(b.begin(), b.end());
+          direct = a == b;
+        }
+        std::vector<int> labels(surface.F.rows());
+        MatX3d map_V(surface.V.rows(), 3);
+        if (direct) {
+          labels = ex.labels;
+          for (int v = 0; v < surface.V.rows(); ++v) map_V.row(v) = rr.X.row(surf_to_tet[v]);
+          pj["map_transfer"] = "identity";
+        } else {
+          // Remeshed surface: closest point on the tet boundary at rest, barycentric transfer.
+          geometry::TriangleTree tree(tm.V, B);
+          double worst = 0;
+          for (int v = 0; v < surface.V.rows(); ++v) {
+            const geometry::ClosestHit h = tree.closest(surface.V.row(v).transpose());
+            worst = std::max(worst, h.dist2);
+            map_V.row(v).setZero();
+            for (int j = 0; j < 3; ++j) map_V.row(v) += h.bary[j] * rr.X.row(B(h.face, j));
+          }
+          for (int f = 0; f < surface.F.rows(); ++f) {
+            const Vec3 c = (surface.V.row(surface.F(f, 0)) + surface.V.row(surface.F(f, 1)) + surface.V.row(surface.F(f, 2))) / 3;
+            labels[f] = ex.labels[tree.closest(c).face];
+          }
+          pj["map_transfer"] = "closest_point";
+          pj["map_transfer_max_distance"] = std::sqrt(worst);
+        }
+        {
+          std::ofstream lf(stage_path("labels.txt"));
+          for (int l : labels) lf << l << "\n";
+          lf.close();
+          if (!lf) throw Error(ErrorKind::Output, (out / "labels.txt").string() + ": write failed");
+        }
+        MeshData pm;
+        pm.V = rr.X;
+        pm.F = PB;
+        pm.T = rr.T;
+        io::CellFields pf;
+        pf["label"] = PL;
+        pf["label"].resize(PB.rows() + rr.T.rows(), -1);
+        if (!folded_map) {  // a folded map is no polycube map: only the hexes built through it are a result
+          io::write_medit(stage_path("polycube.mesh"), pm);
+          io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
+        }
+        io::CellFields df;
+        df["label"] = ex.labels;
+        df["label"].resize(B.rows() + tm.T.rows(), -1);
+        if (!given_map && !given_deformed && !deformed_written) write_deformed_vtk(df);
+        if (!folded_map) {
+          const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
+          io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
+          io::write_obj(stage_path("map.obj"), map_V, surface.F);
+        }
+        // Labels on the input surface and the deformed mesh too.
+        io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
+        if ((rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) &&
+            !(surface_mode && !opt.surface)) {
+          // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
+          // tetmesh.* and polycube.* stay a map. (Not after the surface fallback: tetmesh.* stays
+          // the volume that deformed.* deforms; the surface map is map.obj.)
+          MeshData tmo;
+          tmo.V = rr.rest;
+          tmo.T = rr.T;
+          tmo.F = B;
+          write_mesh("tetmesh", tmo);
+          report["tetmesh"]["vertices"] = rr.rest.rows();
+          report["tetmesh"]["tets"] = rr.T.rows();
+          report["tetmesh"]["realization_edges_split"] = rr.split_edges;
+          report["tetmesh"]["realization_faces_split"] = rr.split_faces;
+        }
+        report["timings"]["polycube"] = sp.seconds() - surface_quad_seconds;
+        hooks.info("polycube: " + std::to_string(ex.charts.charts) + " charts, " + std::to_string(ex.charts.corners) +
+                   " corners, ARAP " + std::to_string(rr.arap) + ", max isometric distortion " +
+                   std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
+        hooks.report("polycube", 1);
+
+        // Surface area of the polycube (a quad count sets the grid so that it holds that many unit squares).
+        auto polycube_area = [&] {
+          double a = 0, l1;
+          deform::l1_measure(rr.X, B, l1, a);
+          return a;
+        };
+        // Hexes through a folded map (or the grid of volume-mode quads): the share of their volume
+        // outside the input, refused over kOutsideInput. A map that overlaps itself can fill a gap
+        // between two parts pressed together by the folds, at a distance no larger than the gap.
+        // Measured: homer, whose folded map closed the gap between the legs, 2.4%; valid meshes
+        // (rod, bumpy torus, humanoid, the hand through its folds) 0.02-0.03%.
+        auto outside_or_refuse = [&](const hex::HexResult& hr, const std::string& what) {
+          const double outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
+          if (outside > kOutsideInput)
+            throw Error(ErrorKind::Polycube,
+                        what + " put " + std::to_string(100 * outside) + "% of the volume outside the input (over " +
+                            std::to_string(100 * kOutsideInput) +
+                            "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
+                            rr.failure + ")");
+          return outside;
+        };
+        // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
+        // seconds_before: the quad stage's so far; known: the quads' distance to the surface if
+        // measured already (else measured here).
+        auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, double seconds_before,
+                               const hex::Hausdorff* known, const json& grid, const json& extra) {
+          if (qr.quality.inverted > 0)
+            throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
+                                                 " quads are folded or degenerate (min scaled Jacobian " +
+                                                 std::to_string(qr.quality.sj_min) + "); try another --quads");
+          MeshData qm;
+          qm.V = qr.V;
+          qm.Q = qr.Q;
+          io::write_medit(stage_path("quad.mesh"), qm);
+          io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
+          io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
+          const hex::Hausdorff hd =
+              known ? *known : hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
           Eigen::AlignedBox3d box;
           for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
-          for (const quad::StartQuads& c : surface_quads)
-            compared.push_back({{"start", c.start},
-                                {"polycube_arap", c.polycube_arap},
-                                {"quads", c.quads.quality.count},
-                                {"sj_min", c.quads.quality.sj_min},
-                                {"sj_mean", c.quads.quality.sj_mean},
-                                {"inverted", c.quads.quality.inverted},
-                                {"hausdorff_rel", c.distance.max / box.diagonal().norm()},
-                                {"kept", c.kept}});
-          report["polycube"]["starts_compared"] = compared;
-        }
-        if (surface_quads.size() > 1 && surface_quads[1].kept) {
-          hooks.info("the " + surface_quads[1].start + " start's polycube gives the better quads: kept");
-          chart::PolycubeExtraction alternative = *ex.alternative;
-          ex = std::move(alternative);
-        }
-        surface_quad_seconds = sq.seconds();
-      }
-      const chart::RealizeResult& rr = ex.realized;
-      json& pj = report["polycube"];
-      if (!given_map) {
-        pj["deformed_arap_distortion"] = dr.arap;
-        const chart::Distortion di = surface_mode ? chart::isometric_distortion_surface(tm.V, dr.X, tm.boundary)
-                                                 : chart::isometric_distortion(tm.V, dr.X, tm.T);
-        pj["deformed_isometric_distortion"] = {{"min", di.min}, {"mean", di.mean}, {"max", di.max}};
-      }
-      pj["charts"] = ex.charts.charts;
-      pj["corners"] = ex.charts.corners;
-      pj["chart_edges"] = ex.charts.chart_edges;
-      json valence = json::object();
-      for (size_t k = 3; k < ex.charts.corner_valence.size(); ++k)
-        if (ex.charts.corner_valence[k]) valence[std::to_string(k)] = ex.charts.corner_valence[k];
-      pj["corner_valence"] = valence;
-      pj["initial_charts"] = ex.initial_charts;
-      pj["cleanup"] = {{"zigzags", ex.cleanup.zigzags},       {"degenerate", ex.cleanup.degenerate},
-                       {"degree1", ex.cleanup.degree1},       {"degree2", ex.cleanup.degree2},
-                       {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite}, {"rims", ex.cleanup.rims}, {"pinches", ex.cleanup.pinches},
-                       {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
-                       {"relabelled_faces", ex.cleanup.relabelled_faces},
-                       {"collapsed_ratio", opt.polycube.collapsed_ratio},
-                       {"pinch_above", ex.cleanup.pinch_above},
-                       {"max_pinches", opt.polycube.cleanup.max_pinches}};
-      pj["realize_options"] = {{"start", opt.polycube.realize.start},
-                               {"corner_splits", opt.polycube.corner_splits},
-                               {"eq17_budget", opt.polycube.realize.eq17_budget},
-                               {"untangle_patience", opt.polycube.realize.untangle_patience},
-                               {"local_first", opt.polycube.realize.local_first},
-                               {"surface_untangle_rounds", opt.polycube.realize.surface_untangle_rounds},
-                               {"relax_iterations", opt.polycube.realize.relax_iterations},
-                               {"continuation_retries", opt.polycube.realize.continuation_retries},
-                               {"stall_repeats", opt.polycube.realize.stall_repeats},
-                               {"penalty_path", opt.polycube.realize.penalty_path}};
-      if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
-        // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
-        // axes (a polycube edge), a flat one when they share the label.
-        std::vector<int> ok(user.size(), 0);
-        int all_ok = 0;
-        for (size_t t = 0; t < mapped.terms.size(); ++t) {
-          const auto& pr = pairs[mapped.terms[t].pair];
-          const int lf = ex.labels[pr.f], lg = ex.labels[pr.g];
-          const bool sat = mapped.terms[t].sharp ? lf / 2 != lg / 2 : lf == lg;
-          ok[mapped.owner[t]] += sat;
-          all_ok += sat;
-        }
-        auto& per = report["constraints"]["per_constraint"];
-        for (size_t i = 0; i < user.size(); ++i)
-          if (per[i]["edges"].get<int>() > 0) per[i]["polycube_satisfied"] = ok[i] / per[i]["edges"].get<double>();
-        report["constraints"]["polycube_satisfied"] = all_ok / static_cast<double>(mapped.terms.size());
-      }
-      pj["chart_graph"] = {{"valid", ex.charts.valid},
-                           {"opposite_adjacent", ex.charts.opposite_adjacent},
-                           {"high_valence_corners", ex.charts.high_valence_corners},
-                           {"non_disk_charts", ex.charts.non_disk_charts},
-                           {"invalid_topology_charts", ex.charts.invalid_topology_charts},
-                           {"loops_with_few_corners", ex.charts.loops_with_few_corners},
-                           {"coincident_corners", ex.charts.coincident_corners},
-                           {"problems", ex.charts.problems}};
-      pj["realization"] = {{"success", rr.success},
-                           {"start", rr.start},
-                           {"split_edges", rr.split_edges},
-                           {"split_faces", rr.split_faces},
-                           {"untangle_iterations", rr.untangle_iterations},
-                           {"arap_iterations", rr.iterations},
-                           {"planes", {rr.planes[0], rr.planes[1], rr.planes[2]}},
-                           {"seconds", rr.seconds}};
-      if (!rr.success) pj["realization"]["failure"] = rr.failure;
-      // Hexes (or volume-mode quads) asked for and no polycube: the realization's best state may
-      // still carry them when it is on the planes with a few tets inverted
-      // (PipelineOptions::hex_through_folds).
-      const bool folded_map = (opt.until == Stage::Hex || opt.until == Stage::Quad) && !surface_mode &&
-                              chart::is_folded(rr) && rr.inverted <= opt.hex_through_folds;
-      if (!rr.success && !folded_map) {
-        std::string where =
-            " (rerun with --write-failed, PipelineOptions::write_failed, to get the state reached in "
-            "OUTDIR/failed_polycube.vtk)";
-        if (opt.write_failed && rr.X.rows() > 0 && rr.T.rows() > 0) {
-          // A diagnosis, not a result: written straight into the output folder under its own name
-          // (the staged outputs are dropped on failure), through a temporary file.
-          const fs::path tmp = out / "failed_polycube.vtk.tmp", dst = out / "failed_polycube.vtk";
-          std::error_code ec;
-          try {  // the realization's failure stays the error reported, whatever happens here
-            write_failed_polycube(tmp.string(), rr.rest, rr.X, rr.T, ex.map_triangles(tm.boundary),
-                                  ex.map_triangle_labels(), opt.vtk_binary);
-            fs::rename(tmp, dst, ec);
-            where = ec ? " (failed_polycube.vtk could not be moved into place: " + ec.message() + ")"
-                       : " (the state reached, with its inverted tets marked, is in " + dst.string() + ")";
-          } catch (const Error& e) {
-            ec = std::make_error_code(std::errc::io_error);
-            where = std::string(" (failed_polycube.vtk could not be written: ") + e.what() + ")";
-          }
-          if (ec) fs::remove(tmp, ec);
-        } else if (rr.X.rows() == 0 || rr.T.rows() == 0) {
-          where.clear();  // failed before any state: nothing to show
-        }
-        // Vertices of polycube edges past a corner (see chart::EdgeOrder): where chart borders run
-        // on past their corners, which the realization cannot undo without flattening tets.
-        const std::string order =
-            ex.edge_order.past_corner > 0
-                ? "; the deformed mesh has " + std::to_string(ex.edge_order.past_corner) +
-                      " vertices of polycube edges past a corner along their edge (e.g. " + ex.edge_order.example +
-                      "), where chart borders run on past their corners"
-                : std::string();
-        // Volume mode short of quads: quads of the surface need no volume map (quad_polycube).
-        const std::string quads_hint =
-            !opt.surface && !given_map && opt.until != Stage::Quad && input_closed
-                ? "; quads of the surface are still possible: --quad (its fallback realizes the deformed boundary "
-                  "alone as a surface polycube; --quad-polycube surface goes there at once)"
-                : "";
-        throw Error(ErrorKind::Polycube, "no valid polycube could be realized: " + rr.failure + order + where + quads_hint);
-      }
-      pj["map_valid"] = rr.success;
-      if (folded_map) {
-        // Its figures, which the realization leaves unset on failure (over every tet, the inverted
-        // ones by their singular values).
-        ex.realized.arap = deform::arap_energy(rr.X, rr.T, deform::ArapRest::build(rr.rest, rr.T), 1.0, nullptr, nullptr);
-        ex.realized.isometric = chart::isometric_distortion(rr.rest, rr.X, rr.T);
-        hooks.warn((given_map ? "the polycube map given is folded (" + rr.failure + ")"
-                              : "no valid polycube could be realized (" + rr.failure + "); its best state is on the "
-                                "planes with " + std::to_string(rr.inverted) + " tets inverted") +
-                   ": extracting the " + std::string(opt.until == Stage::Hex ? "hexes" : "quads") +
-                   " through that folded map (polycube.* and map.obj are not written; "
-                   "--hex-through-folds 0 turns this off)");
-      }
-      pj["arap_distortion"] = rr.arap;
-      pj["inverted_tets"] = rr.inverted;
-      pj["planarity_error"] = rr.planarity_error;
-      pj["misoriented_faces"] = rr.misoriented_faces;
-      if (!surface_mode)
-        pj["edge_order"] = {{"vertices", ex.edge_order.vertices},
-                            {"out_of_order", ex.edge_order.out_of_order},
-                            {"past_corner", ex.edge_order.past_corner}};
-      if (surface_mode) pj["edge_flips"] = ex.edge_flips;
-      pj["edge_collapses"] = ex.edge_collapses;
-      pj["collapse_edge_splits"] = ex.collapse_edge_splits;
-      pj["isometric_distortion"] = {{"min", rr.isometric.min},
-                                    {"mean", rr.isometric.mean},
-                                    {"max", rr.isometric.max},
-                                    {"nearly_flat", rr.isometric.nearly_flat}};
-      if (rr.isometric.nearly_flat > 0 && !folded_map)
-        hooks.warn("the polycube map is nearly degenerate at " + std::to_string(rr.isometric.nearly_flat) +
-                   (surface_mode ? " triangles" : " tets") + " (isometric distortion above " +
-                   std::to_string(static_cast<int>(chart::kNearlyFlat)) + ", max " + std::to_string(rr.isometric.max) +
-                   "): valid, but elements mapped through them are crushed");
-      if (input_closed) {
-        // Every tet positive does not make the polycube embedded: count lines meeting two faces of
-        // the same orientation in a row (the polycube overlaps itself there).
-        const std::array<int, 3> o = hex::overlap_lines(rr.X, ex.map_triangles(tm.boundary), ex.map_triangle_labels());
-        pj["self_overlap_lines"] = {o[0], o[1], o[2]};
-        if (o[0] + o[1] + o[2] > 0)
-          hooks.warn("the polycube overlaps itself (" + std::to_string(o[0] + o[1] + o[2]) +
-                     " sample lines meet two faces of the same orientation in a row): it is not embedded");
-      }
-      if (!ex.charts.valid)
-        hooks.warn("the polycube is exact and has no inverted tet, but its chart graph has problems: " +
-                   (ex.charts.problems.empty() ? std::string("see report.json") : ex.charts.problems.front()));
-
-      // Labels of the input triangles and polycube positions of the input vertices.
-      const MatX3i& B = tm.boundary;
-      // The polycube's triangles: B, or in surface mode B with folded triangles' edges flipped or
-      // collapsed (PL: their labels).
-      const MatX3i& PB = ex.map_triangles(B);
-      const std::vector<int>& PL = ex.map_triangle_labels();
-      bool direct = static_cast<int>(surf_to_tet.size()) == surface.V.rows() && B.rows() == surface.F.rows();
-      for (int f = 0; direct && f < B.rows(); ++f) {
-        std::array<int, 3> a{surf_to_tet[surface.F(f, 0)], surf_to_tet[surface.F(f, 1)], surf_to_tet[surface.F(f, 2)]};
-        std::array<int, 3> b{B(f, 0), B(f, 1), B(f, 2)};
-        std::sort(a.begin(), a.end());
-        std::sort(b.begin(), b.end());
-        direct = a == b;
-      }
-      std::vector<int> labels(surface.F.rows());
-      MatX3d map_V(surface.V.rows(), 3);
-      if (direct) {
-        labels = ex.labels;
-        for (int v = 0; v < surface.V.rows(); ++v) map_V.row(v) = rr.X.row(surf_to_tet[v]);
-        pj["map_transfer"] = "identity";
-      } else {
-        // Remeshed surface: closest point on the tet boundary at rest, barycentric transfer.
-        geometry::TriangleTree tree(tm.V, B);
-        double worst = 0;
-        for (int v = 0; v < surface.V.rows(); ++v) {
-          const geometry::ClosestHit h = tree.closest(surface.V.row(v).transpose());
-          worst = std::max(worst, h.dist2);
-          map_V.row(v).setZero();
-          for (int j = 0; j < 3; ++j) map_V.row(v) += h.bary[j] * rr.X.row(B(h.face, j));
-        }
-        for (int f = 0; f < surface.F.rows(); ++f) {
-          const Vec3 c = (surface.V.row(surface.F(f, 0)) + surface.V.row(surface.F(f, 1)) + surface.V.row(surface.F(f, 2))) / 3;
-          labels[f] = ex.labels[tree.closest(c).face];
-        }
-        pj["map_transfer"] = "closest_point";
-        pj["map_transfer_max_distance"] = std::sqrt(worst);
-      }
-      {
-        std::ofstream lf(stage_path("labels.txt"));
-        for (int l : labels) lf << l << "\n";
-        lf.close();
-        if (!lf) throw Error(ErrorKind::Output, (out / "labels.txt").string() + ": write failed");
-      }
-      MeshData pm;
-      pm.V = rr.X;
-      pm.F = PB;
-      pm.T = rr.T;
-      io::CellFields pf;
-      pf["label"] = PL;
-      pf["label"].resize(PB.rows() + rr.T.rows(), -1);
-      if (!folded_map) {  // a folded map is no polycube map: only the hexes built through it are a result
-        io::write_medit(stage_path("polycube.mesh"), pm);
-        io::write_vtk(stage_path("polycube.vtk"), pm, opt.vtk_binary, pf);
-      }
-      io::CellFields df;
-      df["label"] = ex.labels;
-      df["label"].resize(B.rows() + tm.T.rows(), -1);
-      if (!given_map && !given_deformed && !deformed_written) write_deformed_vtk(df);
-      if (!folded_map) {
-        const SurfaceMesh ps = compact_surface(rr.X, PB);  // the polycube's boundary alone
-        io::write_obj(stage_path("polycube_surface.obj"), ps.V, ps.F);
-        io::write_obj(stage_path("map.obj"), map_V, surface.F);
-      }
-      // Labels on the input surface and the deformed mesh too.
-      io::write_vtk(stage_path("surface.vtk"), make_mesh_data(surface.V, surface.F), opt.vtk_binary, {{"label", labels}});
-      if ((rr.rest.rows() != tm.V.rows() || rr.T.rows() != tm.T.rows() || rr.T != tm.T) &&
-          !(surface_mode && !opt.surface)) {
-        // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
-        // tetmesh.* and polycube.* stay a map. (Not after the surface fallback: tetmesh.* stays
-        // the volume that deformed.* deforms; the surface map is map.obj.)
-        MeshData tmo;
-        tmo.V = rr.rest;
-        tmo.T = rr.T;
-        tmo.F = B;
-        write_mesh("tetmesh", tmo);
-        report["tetmesh"]["vertices"] = rr.rest.rows();
-        report["tetmesh"]["tets"] = rr.T.rows();
-        report["tetmesh"]["realization_edges_split"] = rr.split_edges;
-        report["tetmesh"]["realization_faces_split"] = rr.split_faces;
-      }
-      report["timings"]["polycube"] = sp.seconds() - surface_quad_seconds;
-      hooks.info("polycube: " + std::to_string(ex.charts.charts) + " charts, " + std::to_string(ex.charts.corners) +
-                 " corners, ARAP " + std::to_string(rr.arap) + ", max isometric distortion " +
-                 std::to_string(rr.isometric.max) + ", " + std::to_string(rr.seconds) + " s");
-      hooks.report("polycube", 1);
-
-      // Surface area of the polycube (a quad count sets the grid so that it holds that many unit squares).
-      auto polycube_area = [&] {
-        double a = 0, l1;
-        deform::l1_measure(rr.X, B, l1, a);
-        return a;
-      };
-      // Hexes through a folded map (or the grid of volume-mode quads): the share of their volume
-      // outside the input, refused over kOutsideInput. A map that overlaps itself can fill a gap
-      // between two parts pressed together by the folds, at a distance no larger than the gap.
-      // Measured: homer, whose folded map closed the gap between the legs, 2.4%; valid meshes
-      // (rod, bumpy torus, humanoid, the hand through its folds) 0.02-0.03%.
-      auto outside_or_refuse = [&](const hex::HexResult& hr, const std::string& what) {
-        const double outside = hex::volume_outside(hr.V, hr.H, surface.V, surface.F);
-        if (outside > kOutsideInput)
-          throw Error(ErrorKind::Polycube,
-                      what + " put " + std::to_string(100 * outside) + "% of the volume outside the input (over " +
-                          std::to_string(100 * kOutsideInput) +
-                          "%): the folded map fills a gap between parts of the shape (no valid polycube: " +
-                          rr.failure + ")");
-        return outside;
-      };
-      // quad.mesh/.obj/.vtk and report.json "quad" (both modes).
-      // seconds_before: the quad stage's so far; known: the quads' distance to the surface if
-      // measured already (else measured here).
-      auto write_quads = [&](const quad::QuadResult& qr, int corners, const Stopwatch& sq, double seconds_before,
-                             const hex::Hausdorff* known, const json& grid, const json& extra) {
-        if (qr.quality.inverted > 0)
-          throw Error(ErrorKind::Polycube, std::to_string(qr.quality.inverted) +
-                                               " quads are folded or degenerate (min scaled Jacobian " +
-                                               std::to_string(qr.quality.sj_min) + "); try another --quads");
-        MeshData qm;
-        qm.V = qr.V;
-        qm.Q = qr.Q;
-        io::write_medit(stage_path("quad.mesh"), qm);
-        io::write_vtk(stage_path("quad.vtk"), qm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", qr.quality.per_element}});
-        io::write_obj_quads(stage_path("quad.obj"), qr.V, qr.Q);
-        const hex::Hausdorff hd =
-            known ? *known : hex::hausdorff(qr.V, hex::triangulate_quads(qr.Q), surface.V, surface.F);
-        Eigen::AlignedBox3d box;
-        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
-        if (folded_map && hd.max > kFarFromInput * box.diagonal().norm())  // as for hexes
-          throw Error(ErrorKind::Polycube, "the quads extracted through a folded map are " +
-                                               std::to_string(hd.max / box.diagonal().norm()) +
-                                               " of the bbox diagonal from the input (over " +
-                                               std::to_string(kFarFromInput) + "): part of the shape is missing (no "
-                                               "valid polycube: " + rr.failure + ")");
-        json hist = json::array();
-        for (int c : qr.quality.histogram) hist.push_back(c);
-        report["quad"] = {{"count", qr.quality.count},
-                          {"vertices", qr.V.rows()},
-                          {"irregular_vertices", qr.irregular_vertices},
-                          {"corners", corners},
-                          {"feature_vertices", qr.feature_vertices},
-                          {"sj_min", qr.quality.sj_min},
-                          {"sj_mean", qr.quality.sj_mean},
-                          {"sj_max", qr.quality.sj_max},
-                          {"inverted", qr.quality.inverted},
-                          {"below_0_5", qr.quality.below_0_5},
-                          {"sj_histogram", hist},
-                          {"edge_ratio", edge_ratio_json(qr.quality)},
-                          {"hausdorff", hd.max},
-                          {"hausdorff_rel", hd.max / box.diagonal().norm()},
-                          {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
-                          {"smooth_moves", qr.smooth_moves},
-                          {"search_moves", qr.search_moves},
-                          {"fit", fit_json(qr.fit, box.diagonal().norm())},
-                          {"options", {{"sharp_angle_deg", opt.quad.sharp_angle_deg},
-                                       {"crease_angle_deg", opt.quad.capture_angle_deg},
-                                       {"capture_creases", opt.quad.capture_creases},
-                                       {"smooth_iterations", opt.quad.smooth_iterations},
-                                       {"fit_rounds", opt.quad.fit.rounds},
-                                       {"fit_floor", opt.quad.fit.quality_floor},
-                                       {"max_edge_ratio", opt.quad.max_edge_ratio},
-                                       {"widen_slivers", opt.quad.widen_slivers}}},
-                          {"creases", {{"runs", qr.crease_runs},
-                                       {"captured", qr.crease_captured},
-                                       {"moved_vertices", qr.crease_moved},
-                                       {"followed_before", qr.creases_before.followed},
-                                       {"followed_after", qr.creases_after.followed},
-                                       {"max_gap_before_rel", qr.creases_before.max_gap / box.diagonal().norm()},
-                                       {"max_gap_after_rel", qr.creases_after.max_gap / box.diagonal().norm()}}},
-                          {"grid", grid},
-                          {"seconds", seconds_before + sq.seconds()}};
-        report["quad"].update(extra);
-        report["quad"]["through_folded_map"] = folded_map;
-        report["timings"]["quad"] = seconds_before + sq.seconds();
-        hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
-                   std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
-                   ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " (RMS " +
-                   std::to_string(hd.rms() / box.diagonal().norm()) +
-                   ") of the bbox diagonal");
-        add_hausdorff(report["quad"], hd, box.diagonal().norm(), "quad");
-        // Surface mode: the surface ARAP lets developable parts be pressed flat, and the layout then
-        // loses them; the volume's does not (humanoid, 2000 quads: Hausdorff 141e-3 in surface mode,
-        // 8.8e-3 through the volume).
-        warn_if_far(hooks, hd, box.diagonal().norm(), "quad mesh",
-                    opt.surface && input_closed
-                        ? "; the volume pipeline (--quad without --surface) keeps the parts the surface mode's layout "
-                          "loses (with --quad-polycube surface, its deformed boundary gives the quads without a tet "
-                          "realization)"
-                        : "");
-        warn_if_slivers(hooks, qr.quality, "quads");
-        hooks.report("quad", 1);
-      };
-
-      // ---- hex --------------------------------------------------------------------------
-      if (opt.until == Stage::Hex) {
-        Stopwatch sh;
-        hooks.report("hex", 0);
-        hooks.info("extracting hexes");
-        hex::HexOptions ho = opt.hex;
-        ho.folded_map = folded_map;
-        // Hexes inverted or poor next to planes far closer than a cell (a riser kept a cell
-        // wide): the planes of thicker steps merged, extracted again, kept when better.
-        std::vector<hex::ThinStepRetry> tries;
-        hex::HexResult hr = hex::hex_mesh_thin_step_retries(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, &tries,
-                                                            &ho.merge_thin_steps, hooks);
-        json retries = json::array();
-        for (const auto& t : tries)
-          retries.push_back({{"thin_steps", t.thin_steps}, {"inverted", t.inverted}, {"sj_min", t.sj_min},
-                             {"replaced", t.replaced}});
-        if (hr.quality.inverted > 0) {
-          std::string why = "; try more hexes (--hexes)";
-          if (hr.min_slab_ratio < 0.05)
-            why = "; the polycube has planes " + std::to_string(hr.min_slab_ratio) +
-                  " of a cell apart that must stay a cell apart (a slab or step far thinner than a hex: a higher "
-                  "--thin-steps merges a step's planes unless they face each other), which stretches the map there";
-          throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
-                                               " hexes are inverted or degenerate after optimization (min scaled "
-                                               "Jacobian " + std::to_string(hr.quality.sj_min) + ")" +
-                                               (folded_map ? " through a folded map (no valid polycube: " +
-                                                                 rr.failure + ")"
-                                                           : why));
-        }
-        const MatX3i hexF = hex::triangulate_quads(hex::boundary_quads(hr.H));
-        const hex::Hausdorff hd = hex::hausdorff(hr.V, hexF, surface.V, surface.F);
-        Eigen::AlignedBox3d box;
-        for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
-        const double diag = box.diagonal().norm();
-        // Through a folded map that also overlaps itself, a part may be missing from the grid: such
-        // hexes are no result.
-        if (folded_map && hd.max > kFarFromInput * diag)
-          throw Error(ErrorKind::Polycube, "the hexes extracted through a folded map are " + std::to_string(hd.max / diag) +
-                                               " of the bbox diagonal from the input (over " +
-                                               std::to_string(kFarFromInput) + "): part of the shape is missing (no "
-                                               "valid polycube: " + rr.failure + ")");
-        // ...nor are hexes filling a gap of the input.
-        const double outside = folded_map ? outside_or_refuse(hr, "the hexes extracted through a folded map") : 0.0;
-        MeshData hm;
-        hm.V = hr.V;
-        hm.H = hr.H;
-        io::write_medit(stage_path("hex.mesh"), hm);
-        io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_element}});
-        auto quality_json = [](const hex::HexQuality& q) {
+          if (folded_map && hd.max > kFarFromInput * box.diagonal().norm())  // as for hexes
+            throw Error(ErrorKind::Polycube, "the quads extracted through a folded map are " +
+                                                 std::to_string(hd.max / box.diagonal().norm()) +
+                                                 " of the bbox diagonal from the input (over " +
+                                                 std::to_string(kFarFromInput) + "): part of the shape is missing (no "
+                                                 "valid polycube: " + rr.failure + ")");
           json hist = json::array();
-          for (int c : q.histogram) hist.push_back(c);
-          return json{{"count", q.count},         {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
-                      {"sj_max", q.sj_max},       {"inverted", q.inverted},     {"below_0_2", q.below_0_2},
-                      {"below_0_5", q.below_0_5}, {"sj_histogram", hist},         {"edge_ratio", edge_ratio_json(q)}};
+          for (int c : qr.quality.histogram) hist.push_back(c);
+          report["quad"] = {{"count", qr.quality.count},
+                            {"vertices", qr.V.rows()},
+                            {"irregular_vertices", qr.irregular_vertices},
+                            {"corners", corners},
+                            {"feature_vertices", qr.feature_vertices},
+                            {"sj_min", qr.quality.sj_min},
+                            {"sj_mean", qr.quality.sj_mean},
+                            {"sj_max", qr.quality.sj_max},
+                            {"inverted", qr.quality.inverted},
+                            {"below_0_5", qr.quality.below_0_5},
+                            {"sj_histogram", hist},
+                            {"edge_ratio", edge_ratio_json(qr.quality)},
+                            {"hausdorff", hd.max},
+                            {"hausdorff_rel", hd.max / box.diagonal().norm()},
+                            {"extracted", {{"sj_min", qr.extracted.sj_min}, {"sj_mean", qr.extracted.sj_mean}}},
+                            {"smooth_moves", qr.smooth_moves},
+                            {"search_moves", qr.search_moves},
+                            {"fit", fit_json(qr.fit, box.diagonal().norm())},
+                            {"options", {{"sharp_angle_deg", opt.quad.sharp_angle_deg},
+                                         {"crease_angle_deg", opt.quad.capture_angle_deg},
+                                         {"capture_creases", opt.quad.capture_creases},
+                                         {"smooth_iterations", opt.quad.smooth_iterations},
+                                         {"fit_rounds", opt.quad.fit.rounds},
+                                         {"fit_floor", opt.quad.fit.quality_floor},
+                                         {"max_edge_ratio", opt.quad.max_edge_ratio},
+                                         {"widen_slivers", opt.quad.widen_slivers}}},
+                            {"creases", {{"runs", qr.crease_runs},
+                                         {"captured", qr.crease_captured},
+                                         {"moved_vertices", qr.crease_moved},
+                                         {"followed_before", qr.creases_before.followed},
+                                         {"followed_after", qr.creases_after.followed},
+                                         {"max_gap_before_rel", qr.creases_before.max_gap / box.diagonal().norm()},
+                                         {"max_gap_after_rel", qr.creases_after.max_gap / box.diagonal().norm()}}},
+                            {"grid", grid},
+                            {"seconds", seconds_before + sq.seconds()}};
+          report["quad"].update(extra);
+          report["quad"]["through_folded_map"] = folded_map;
+          report["timings"]["quad"] = seconds_before + sq.seconds();
+          hooks.info("quad mesh: " + std::to_string(qr.quality.count) + " quads, scaled Jacobian min " +
+                     std::to_string(qr.quality.sj_min) + " mean " + std::to_string(qr.quality.sj_mean) +
+                     ", Hausdorff " + std::to_string(hd.max / box.diagonal().norm()) + " (RMS " +
+                     std::to_string(hd.rms() / box.diagonal().norm()) +
+                     ") of the bbox diagonal");
+          add_hausdorff(report["quad"], hd, box.diagonal().norm(), "quad");
+          // Surface mode: the surface ARAP lets developable parts be pressed flat, and the layout then
+          // loses them; the volume's does not (humanoid, 2000 quads: Hausdorff 141e-3 in surface mode,
+          // 8.8e-3 through the volume).
+          warn_if_far(hooks, hd, box.diagonal().norm(), "quad mesh",
+                      opt.surface && input_closed
+                          ? "; the volume pipeline (--quad without --surface) keeps the parts the surface mode's layout "
+                            "loses (with --quad-polycube surface, its deformed boundary gives the quads without a tet "
+                            "realization)"
+                          : "");
+          warn_if_slivers(hooks, qr.quality, "quads");
+          hooks.report("quad", 1);
         };
-        json hj = quality_json(hr.quality);
-        add_hausdorff(hj, hd, diag, "hex");
-        hj["vertices"] = hr.V.rows();
-        hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
-                      {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
-                      {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
-                      {"merged_planes", hr.merged_planes}, {"thin_steps", ho.merge_thin_steps},
-                      {"min_slab_ratio", hr.min_slab_ratio},
-                      {"grading_density_min", hr.grading_min_slope}, {"grading_density_max", hr.grading_max_slope}};
-        hj["pillow_hexes"] = hr.pillow_hexes;
-        hj["retries"] = retries;
-        hj["sharp_vertices"] = hr.sharp_vertices;
-        hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}};
-        hj["variants"] = json::array();
-        for (const auto& t : hr.tried)
-          hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});
-        hj["extracted"] = quality_json(hr.extracted);
-        hj["extracted"].erase("sj_histogram");
-        hj["smooth_moves"] = hr.smooth_moves;
-        hj["untangled"] = {{"inverted_before", hr.untangle_inverted_before},
-                           {"inverted_after", hr.untangle_inverted_after},
-                           {"refitted", hr.refitted_after_untangling},
-                           {"hausdorff_before_refit_rel",
-                            hr.hausdorff_before_refit < 0 ? -1.0 : hr.hausdorff_before_refit / diag}};
-        hj["fit"] = fit_json(hr.fit, diag);
-        hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
-                         {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
-                         {"thin_steps", opt.hex.merge_thin_steps},
-                         {"thin_step_retry_below", opt.hex.thin_step_retry_below},
-                         {"max_edge_ratio", opt.hex.max_edge_ratio}, {"fit_rounds", opt.hex.fit.rounds},
-                         {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
-                         {"capture_creases", opt.hex.capture_creases},
-                         {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
-                         {"grading_max", opt.hex.grading.max_ratio}};
-        hj["through_folded_map"] = folded_map;
-        if (folded_map) hj["volume_outside_rel"] = outside;
-        hj["seconds"] = sh.seconds();
-        report["hex"] = hj;
-        report["timings"]["hex"] = sh.seconds();
-        hooks.info("hex mesh: " + std::to_string(hr.quality.count) + " hexes, scaled Jacobian min " +
-                   std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
-                   ", Hausdorff " + std::to_string(hd.max / diag) + " (RMS " +
-                   std::to_string(hd.rms() / diag) + ") of the bbox diagonal");
-        warn_if_far(hooks, hd, diag, "hex mesh");
-        warn_if_slivers(hooks, hr.quality, "hexes");
-        hooks.report("hex", 1);
-      }
 
-      // ---- quad -------------------------------------------------------------------------
-      if (opt.until == Stage::Quad && surface_mode) {
-        Stopwatch sq;
-        hooks.report("quad", 0);
-        const auto kept = std::find_if(surface_quads.begin(), surface_quads.end(),
-                                       [](const quad::StartQuads& c) { return c.kept; });
-        if (kept == surface_quads.end()) throw Error(ErrorKind::Internal, "surface mode: no quads were extracted");
-        const quad::QuadResult& qr = kept->quads;
-        json retries = json::array();
-        double thin_steps = opt.quad.merge_thin_steps;  // of the quads kept
-        const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
-        for (const quad::QuadThinStepRetry& t : kept->retries) {
-          if (t.replaced) thin_steps = t.thin_steps;
-          retries.push_back({{"thin_steps", t.thin_steps},
-                             {"merged_planes", t.merged_planes},
-                             {"edge_ratio_over_10", t.over_10},
-                             {"edge_ratio_max", t.ratio_max},
-                             {"sj_min", t.sj_min},
-                             {"hausdorff_rel", t.hausdorff / diag},
-                             {"replaced", t.replaced}});
+        // ---- hex --------------------------------------------------------------------------
+        if (opt.until == Stage::Hex) {
+          Stopwatch sh;
+          hooks.report("hex", 0);
+          hooks.info("extracting hexes");
+          hex::HexOptions ho = opt.hex;
+          ho.folded_map = folded_map;
+          // Hexes inverted or poor next to planes far closer than a cell (a riser kept a cell
+          // wide): the planes of thicker steps merged, extracted again, kept when better.
+          std::vector<hex::ThinStepRetry> tries;
+          hex::HexResult hr = hex::hex_mesh_thin_step_retries(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, &tries,
+                                                              &ho.merge_thin_steps, hooks);
+          json retries = json::array();
+          for (const auto& t : tries)
+            retries.push_back({{"thin_steps", t.thin_steps}, {"inverted", t.inverted}, {"sj_min", t.sj_min},
+                               {"replaced", t.replaced}});
+          if (hr.quality.inverted > 0) {
+            std::string why = "; try more hexes (--hexes)";
+            if (hr.min_slab_ratio < 0.05)
+              why = "; the polycube has planes " + std::to_string(hr.min_slab_ratio) +
+                    " of a cell apart that must stay a cell apart (a slab or step far thinner than a hex: a higher "
+                    "--thin-steps merges a step's planes unless they face each other), which stretches the map there";
+            throw Error(ErrorKind::Polycube, std::to_string(hr.quality.inverted) +
+                                                 " hexes are inverted or degenerate after optimization (min scaled "
+                                                 "Jacobian " + std::to_string(hr.quality.sj_min) + ")" +
+                                                 (folded_map ? " through a folded map (no valid polycube: " +
+                                                                   rr.failure + ")"
+                                                             : why));
+          }
+          const MatX3i hexF = hex::triangulate_quads(hex::boundary_quads(hr.H));
+          const hex::Hausdorff hd = hex::hausdorff(hr.V, hexF, surface.V, surface.F);
+          Eigen::AlignedBox3d box;
+          for (int v = 0; v < surface.V.rows(); ++v) box.extend(surface.V.row(v).transpose());
+          const double diag = box.diagonal().norm();
+          // Through a folded map that also overlaps itself, a part may be missing from the grid: such
+          // hexes are no result.
+          if (folded_map && hd.max > kFarFromInput * diag)
+            throw Error(ErrorKind::Polycube, "the hexes extracted through a folded map are " + std::to_string(hd.max / diag) +
+                                                 " of the bbox diagonal from the input (over " +
+                                                 std::to_string(kFarFromInput) + "): part of the shape is missing (no "
+                                                 "valid polycube: " + rr.failure + ")");
+          // ...nor are hexes filling a gap of the input.
+          const double outside = folded_map ? outside_or_refuse(hr, "the hexes extracted through a folded map") : 0.0;
+          MeshData hm;
+          hm.V = hr.V;
+          hm.H = hr.H;
+          io::write_medit(stage_path("hex.mesh"), hm);
+          io::write_vtk(stage_path("hex.vtk"), hm, opt.vtk_binary, {}, {}, {{"scaled_jacobian", hr.quality.per_element}});
+          auto quality_json = [](const hex::HexQuality& q) {
+            json hist = json::array();
+            for (int c : q.histogram) hist.push_back(c);
+            return json{{"count", q.count},         {"sj_min", q.sj_min},         {"sj_mean", q.sj_mean},
+                        {"sj_max", q.sj_max},       {"inverted", q.inverted},     {"below_0_2", q.below_0_2},
+                        {"below_0_5", q.below_0_5}, {"sj_histogram", hist},         {"edge_ratio", edge_ratio_json(q)}};
+          };
+          json hj = quality_json(hr.quality);
+          add_hausdorff(hj, hd, diag, "hex");
+          hj["vertices"] = hr.V.rows();
+          hj["grid"] = {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit},
+                        {"planes", {hr.heights[0].size(), hr.heights[1].size(), hr.heights[2].size()}},
+                        {"hexes", hr.grid_hexes}, {"snapping", hr.snapping}, {"shared_planes", hr.shared_planes},
+                        {"merged_planes", hr.merged_planes}, {"thin_steps", ho.merge_thin_steps},
+                        {"min_slab_ratio", hr.min_slab_ratio},
+                        {"grading_density_min", hr.grading_min_slope}, {"grading_density_max", hr.grading_max_slope}};
+          hj["pillow_hexes"] = hr.pillow_hexes;
+          hj["retries"] = retries;
+          hj["sharp_vertices"] = hr.sharp_vertices;
+          hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}};
+          hj["variants"] = json::array();
+          for (const auto& t : hr.tried)
+            hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});
+          hj["extracted"] = quality_json(hr.extracted);
+          hj["extracted"].erase("sj_histogram");
+          hj["smooth_moves"] = hr.smooth_moves;
+          hj["untangled"] = {{"inverted_before", hr.untangle_inverted_before},
+                             {"inverted_after", hr.untangle_inverted_after},
+                             {"refitted", hr.refitted_after_untangling},
+                             {"hausdorff_before_refit_rel",
+                              hr.hausdorff_before_refit < 0 ? -1.0 : hr.hausdorff_before_refit / diag}};
+          hj["fit"] = fit_json(hr.fit, diag);
+          hj["options"] = {{"target_hexes", opt.hex.target_hexes}, {"hex_size", opt.hex.hex_size},
+                           {"pillow", opt.hex.pillow}, {"smooth_iterations", opt.hex.smooth_iterations},
+                           {"thin_steps", opt.hex.merge_thin_steps},
+                           {"thin_step_retry_below", opt.hex.thin_step_retry_below},
+                           {"max_edge_ratio", opt.hex.max_edge_ratio}, {"fit_rounds", opt.hex.fit.rounds},
+                           {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
+                           {"capture_creases", opt.hex.capture_creases},
+                           {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
+                           {"grading_max", opt.hex.grading.max_ratio}};
+          hj["through_folded_map"] = folded_map;
+          if (folded_map) hj["volume_outside_rel"] = outside;
+          hj["seconds"] = sh.seconds();
+          report["hex"] = hj;
+          report["timings"]["hex"] = sh.seconds();
+          hooks.info("hex mesh: " + std::to_string(hr.quality.count) + " hexes, scaled Jacobian min " +
+                     std::to_string(hr.quality.sj_min) + " mean " + std::to_string(hr.quality.sj_mean) +
+                     ", Hausdorff " + std::to_string(hd.max / diag) + " (RMS " +
+                     std::to_string(hd.rms() / diag) + ") of the bbox diagonal");
+          warn_if_far(hooks, hd, diag, "hex mesh");
+          warn_if_slivers(hooks, hr.quality, "hexes");
+          hooks.report("hex", 1);
         }
-        write_quads(qr, ex.charts.corners, sq, surface_quad_seconds, &kept->distance,
-                    {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
-                     {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
-                     {"thin_steps", thin_steps}, {"grading", opt.quad.grading.strength},
-                     {"grading_density_min", qr.grading_min}, {"grading_density_max", qr.grading_max}},
-                    json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices},
-                         {"thin_step_retries", retries}});
-      }
-      if (opt.until == Stage::Quad && !surface_mode) {
-        Stopwatch sq;
-        hooks.report("quad", 0);
-        hooks.info("extracting the quad mesh of the surface");
-        hex::HexOptions ho = opt.hex;
-        ho.pillow = "off";
-        ho.smooth_iterations = 0;
-        ho.fit.rounds = 0;  // the quads are fitted to the surface themselves
-        ho.folded_map = folded_map;
-        bool report_grid_optimized = false;
-        if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
-        hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
-        // Through a folded map, as for hexes: a grid filling a gap of the input gives quads
-        // spanning it (the hand's grid at 2000 quads: 0.01%).
-        const double grid_outside =
-            folded_map ? outside_or_refuse(hr, "the hex grid the quads would come from, through a folded map,") : 0.0;
-        quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
-        if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
-          // Grid faces straddling a sharp edge the polycube has no edge along can fold when
-          // projected: untangle the grid with the hex optimization (boundary kept on the surface
-          // and its features) and take its boundary.
-          hooks.info(std::to_string(qr.quality.inverted) + " quads fold on the projected grid; optimizing the grid first");
-          ho.smooth_iterations = opt.hex.smooth_iterations;
-          hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
-          qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
-          report_grid_optimized = true;
+
+        // ---- quad -------------------------------------------------------------------------
+        if (opt.until == Stage::Quad && surface_mode) {
+          Stopwatch sq;
+          hooks.report("quad", 0);
+          const auto kept = std::find_if(surface_quads.begin(), surface_quads.end(),
+                                         [](const quad::StartQuads& c) { return c.kept; });
+          if (kept == surface_quads.end()) throw Error(ErrorKind::Internal, "surface mode: no quads were extracted");
+          const quad::QuadResult& qr = kept->quads;
+          json retries = json::array();
+          double thin_steps = opt.quad.merge_thin_steps;  // of the quads kept
+          const double diag = (surface.V.colwise().maxCoeff() - surface.V.colwise().minCoeff()).norm();
+          for (const quad::QuadThinStepRetry& t : kept->retries) {
+            if (t.replaced) thin_steps = t.thin_steps;
+            retries.push_back({{"thin_steps", t.thin_steps},
+                               {"merged_planes", t.merged_planes},
+                               {"edge_ratio_over_10", t.over_10},
+                               {"edge_ratio_max", t.ratio_max},
+                               {"sj_min", t.sj_min},
+                               {"hausdorff_rel", t.hausdorff / diag},
+                               {"replaced", t.replaced}});
+          }
+          write_quads(qr, ex.charts.corners, sq, surface_quad_seconds, &kept->distance,
+                      {{"cells", qr.cells}, {"cells_per_unit", qr.cells_per_unit}, {"planes", qr.planes},
+                       {"snapping", "sorted_piecewise_linear"}, {"merged_planes", qr.merged_planes},
+                       {"thin_steps", thin_steps}, {"grading", opt.quad.grading.strength},
+                       {"grading_density_min", qr.grading_min}, {"grading_density_max", qr.grading_max}},
+                      json{{"border_loops", qr.border_loops}, {"border_vertices", qr.border_vertices},
+                           {"thin_step_retries", retries}});
         }
-        write_quads(qr, ex.charts.corners, sq, 0, nullptr,
-                    {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
-                     {"optimized", report_grid_optimized}},
-                    folded_map ? json{{"grid_volume_outside_rel", grid_outside}} : json::object());
+        if (opt.until == Stage::Quad && !surface_mode) {
+          Stopwatch sq;
+          hooks.report("quad", 0);
+          hooks.info("extracting the quad mesh of the surface");
+          hex::HexOptions ho = opt.hex;
+          ho.pillow = "off";
+          ho.smooth_iterations = 0;
+          ho.fit.rounds = 0;  // the quads are fitted to the surface themselves
+          ho.folded_map = folded_map;
+          bool report_grid_optimized = false;
+          if (opt.target_quads > 0) ho.cells_per_unit = std::sqrt(opt.target_quads / polycube_area());
+          hex::HexResult hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
+          // Through a folded map, as for hexes: a grid filling a gap of the input gives quads
+          // spanning it (the hand's grid at 2000 quads: 0.01%).
+          const double grid_outside =
+              folded_map ? outside_or_refuse(hr, "the hex grid the quads would come from, through a folded map,") : 0.0;
+          quad::QuadResult qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+          if (qr.quality.inverted > 0 && opt.hex.smooth_iterations > 0) {
+            // Grid faces straddling a sharp edge the polycube has no edge along can fold when
+            // projected: untangle the grid with the hex optimization (boundary kept on the surface
+            // and its features) and take its boundary.
+            hooks.info(std::to_string(qr.quality.inverted) + " quads fold on the projected grid; optimizing the grid first");
+            ho.smooth_iterations = opt.hex.smooth_iterations;
+            hr = hex::hex_mesh_from_polycube(rr.rest, rr.T, rr.X, PB, PL, &surface, ho, hooks);
+            qr = quad::quad_mesh_from_hexes(hr.V, hr.H, surface, opt.quad, hooks);
+            report_grid_optimized = true;
+          }
+          write_quads(qr, ex.charts.corners, sq, 0, nullptr,
+                      {{"cells", hr.cells}, {"cells_per_unit", hr.cells_per_unit}, {"snapping", hr.snapping},
+                       {"optimized", report_grid_optimized}},
+                      folded_map ? json{{"grid_volume_outside_rel", grid_outside}} : json::object());
+        }
+      };
+      try {
+        polycube_stage();
+      } catch (const Error& e) {
+        if (e.kind() != ErrorKind::Polycube || !folded_quads || !volume_extraction) throw;
+        folded_refusal = e.what();
+        hooks.warn("the quads through the folded map were refused (" + folded_refusal +
+                   "); taking the deformed boundary's surface polycube instead");
+        polycube_stage();
       }
     }
 

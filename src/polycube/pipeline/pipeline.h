@@ -57,7 +57,8 @@ struct PipelineOptions {
   int hex_through_folds = 100;
   /// Volume mode with Stage::Quad, the polycube the quads come from: "auto" (default) the volume's
   /// (the tet mesh realized, chart::extract_polycube), and when no valid polycube map of the volume
-  /// is realized and no folded map can carry the quads (see hex_through_folds), the labels cleaned
+  /// is realized and no folded map carries the quads (none within hex_through_folds, or its quads
+  /// refused: the stage then runs a second time from the same volume extraction), the labels cleaned
   /// and realized again on the deformed boundary alone, as in surface mode
   /// (chart::realize_surface_polycube: no tets to invert), the quads then coming from that surface
   /// polycube as with `surface`; "surface": that surface polycube straight away (no tet
