@@ -576,8 +576,11 @@ TEST(Cli, QuadsFromTheSurfacePolycubeOfTheVolumeDeformation) {
   EXPECT_EQ(a["mode"], "volume");
   EXPECT_FALSE(a["polycube"].contains("surface_fallback"));
   EXPECT_GT(io::read_mesh(out + "_auto/polycube.mesh").T.rows(), 0);
-  // Anything else is refused.
+  // Anything else is refused; without volume-mode quads the option is said to be ignored.
   EXPECT_EQ(run_cli("--example box_hole --quad --quad-polycube tets -o " + out + "_bad").code, 2);
+  r = run_cli("--example box_hole --until tet --quad-polycube surface -o " + out + "_tet");
+  EXPECT_EQ(r.code, 0) << r.output;
+  EXPECT_NE(r.output.find("--quad-polycube surface ignored"), std::string::npos) << r.output;
 }
 
 TEST(Cli, QuadMeshOfTheSphere) {

@@ -207,6 +207,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       throw Error(ErrorKind::Usage, "hex meshes need the volume: drop --surface (surface mode builds quads)");
     if (opt.quad_polycube != "auto" && opt.quad_polycube != "surface" && opt.quad_polycube != "volume")
       throw Error(ErrorKind::Usage, "quad polycube must be auto, surface or volume, not '" + opt.quad_polycube + "'");
+    if (opt.quad_polycube != "auto" && (opt.until != Stage::Quad || opt.surface))
+      hooks.warn("--quad-polycube " + opt.quad_polycube + " ignored: it applies to quads in volume mode (--quad without "
+                 "--surface)");
     if (!opt.surface && opt.polycube.realize.relax_iterations > 0)
       throw Error(ErrorKind::Usage, "--relax relaxes the surface polycube map: it needs --surface");
     if (!opt.example.empty()) report["input"]["example"] = opt.example;
