@@ -187,6 +187,14 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
     io::write_medit(stage_path(stem + ".mesh"), m);
     io::write_vtk(stage_path(stem + ".vtk"), m, opt.vtk_binary);
   };
+  // tetmesh.mesh/.vtk: a tet mesh with its boundary triangles.
+  auto write_tetmesh = [&](const MatX3d& V, const MatX4i& T, const MatX3i& F) {
+    MeshData m;
+    m.V = V;
+    m.T = T;
+    m.F = F;
+    write_mesh("tetmesh", m);
+  };
 
   try {
     // ---- load ---------------------------------------------------------------------------
@@ -382,11 +390,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       }
       tj["boundary_tets_split"] = split;
       report["tetmesh"] = tj;
-      MeshData out_m;
-      out_m.V = tm.V;
-      out_m.T = tm.T;
-      out_m.F = tm.boundary;
-      if (!opt.surface) write_mesh("tetmesh", out_m);
+      if (!opt.surface) write_tetmesh(tm.V, tm.T, tm.boundary);
       report["timings"]["tet"] = st.seconds();
       if (!opt.surface) hooks.info("tet mesh: " + std::to_string(tm.V.rows()) + " vertices, " + std::to_string(tm.T.rows()) +
                  " tets, min dihedral " + std::to_string(tj["min_dihedral_deg"].get<double>()) + " deg");
@@ -649,7 +653,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           ex = chart::extract_polycube(tm.V, tm.T, tm.boundary, dr.X, opt.polycube, hooks);
           report["polycube"]["retry"] = {{"reason", first}, {"barrier_weight", w}};
         }
-        // Volume-mode quads without a volume map (PipelineOptions::quad_surface_fallback): the labels
+        // Volume-mode quads without a volume map (PipelineOptions::quad_polycube): the labels
         // cleaned and realized again on the deformed boundary alone; from here on the run is in surface
         // mode (tm: that boundary, no tets), and deformed.vtk keeps the volume with its labels.
         bool surface_mode = opt.surface;
@@ -668,7 +672,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
             hooks.warn("no valid polycube map of the volume (" + reason +
                        "); realizing the polycube of the deformed boundary alone for the quads (surface mode from here; "
                        "--quad-polycube surface goes there without trying the volume)");
-          if (!given_deformed) {
+          if (!folded_refusal.empty()) {
+            deformed_written = true;  // by the first pass, with the same volume labels
+          } else if (!given_deformed) {
             io::CellFields df;
             df["label"] = ex.labels;
             df["label"].resize(tm.boundary.rows() + tm.T.rows(), -1);
@@ -678,11 +684,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           if (!folded_refusal.empty()) {
             // The first pass may have rewritten tetmesh.* with the realization's splits and
             // collapses: back to the volume that deformed.* deforms.
-            MeshData tmo;
-            tmo.V = tm.V;
-            tmo.T = tm.T;
-            tmo.F = tm.boundary;
-            write_mesh("tetmesh", tmo);
+            write_tetmesh(tm.V, tm.T, tm.boundary);
             report["tetmesh"]["vertices"] = tm.V.rows();
             report["tetmesh"]["tets"] = tm.T.rows();
             for (const char* k : {"realization_edges_split", "realization_faces_split"}) report["tetmesh"].erase(k);
@@ -977,11 +979,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           // The tet mesh gained midpoints or lost the tets of collapsed edges: rewrite it so that
           // tetmesh.* and polycube.* stay a map. (Not after the surface fallback: tetmesh.* stays
           // the volume that deformed.* deforms; the surface map is map.obj.)
-          MeshData tmo;
-          tmo.V = rr.rest;
-          tmo.T = rr.T;
-          tmo.F = B;
-          write_mesh("tetmesh", tmo);
+          write_tetmesh(rr.rest, rr.T, B);
           report["tetmesh"]["vertices"] = rr.rest.rows();
           report["tetmesh"]["tets"] = rr.T.rows();
           report["tetmesh"]["realization_edges_split"] = rr.split_edges;
