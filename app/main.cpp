@@ -345,6 +345,13 @@ int main(int argc, char** argv) {
                  "surface: that surface polycube straight away (the tet realization skipped); volume: the volume's "
                  "only (fails with exit code 7 where it is not realized)")
       ->capture_default_str()->check(CLI::IsMember({"auto", "surface", "volume"}));
+  app.add_option("--slim-collapse", opt.slim_collapse_rounds,
+                 "Volume mode: the paper's slim-triangle collapse. When the deformation's line search is cut short by "
+                 "the barrier while boundary triangles have an angle under --slim-angle degrees, their shortest edges are "
+                 "collapsed (tet mesh and deformed mesh alike) and the deformation resumes, at most N times (0 = off)")
+      ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option("--slim-angle", opt.deform.slim_angle_deg, "Angle (degrees) under which a boundary triangle is slim")
+      ->capture_default_str()->check(CLI::Range(0.1, 30.0));
   app.add_flag("--write-failed", opt.write_failed,
                "When no valid polycube is realized, write the state reached to OUTDIR/failed_polycube.vtk "
                "(cell fields label and inverted) for inspection; the run still fails (exit code 7)");

@@ -748,6 +748,75 @@ std::set<std::array<int, 3>> sorted_faces(const MatX3i& B) {
 
 }  // namespace
 
+TEST(Chart, SlimTriangleCollapseKeepsAValidTetMeshOnBothSides) {
+  // The slim-triangle collapse on a sphere deformed into a polycube.
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 4000);
+  const auto r = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  // Smallest angle (degrees) per triangle.
+  auto angles = [](const MatX3d& X, const MatX3i& B) {
+    std::vector<double> out(B.rows());
+    for (int f = 0; f < B.rows(); ++f) {
+      double worst = -1;
+      for (int k = 0; k < 3; ++k) {
+        const Vec3 a = X.row(B(f, k)), b = X.row(B(f, (k + 1) % 3)), c = X.row(B(f, (k + 2) % 3));
+        worst = std::max(worst, (b - a).normalized().dot((c - a).normalized()));
+      }
+      out[f] = std::acos(std::clamp(worst, -1.0, 1.0)) * 180 / M_PI;
+    }
+    return out;
+  };
+  // "Slim": the most slender 5% of the triangles (a sphere's stay fairly round).
+  std::vector<double> a0 = angles(r.X, tm.boundary);
+  std::sort(a0.begin(), a0.end());
+  const double limit = a0[a0.size() / 20];
+  auto slim = [&](const MatX3d& X, const MatX3i& B) {
+    const auto a = angles(X, B);
+    return static_cast<int>(std::count_if(a.begin(), a.end(), [&](double x) { return x < limit; }));
+  };
+  const int before = slim(r.X, tm.boundary);
+  ASSERT_GT(before, 0);
+  MatX3d rest = tm.V, X = r.X;
+  MatX4i T = tm.T;
+  MatX3i B = tm.boundary;
+  std::vector<int> merged;
+  int left = -1;
+  const int made = chart::collapse_slim_triangles(rest, X, T, B, limit, merged, 10, &left);
+  ASSERT_GT(made, 0);
+  EXPECT_GE(left, 0);
+  EXPECT_LT(slim(X, B), before);
+  // Two triangles per collapse; the merged vertices referenced by nothing and sitting on their
+  // partner at rest and in X; the others where they were, or on the collapsed edge at rest.
+  EXPECT_EQ(B.rows(), tm.boundary.rows() - 2 * made);
+  int merged_count = 0;
+  for (int v = 0; v < tm.V.rows(); ++v) {
+    if (merged[v] < 0) continue;
+    ++merged_count;
+    EXPECT_LT(merged[merged[v]], 0);
+    EXPECT_EQ(rest.row(v), rest.row(merged[v]));
+    EXPECT_EQ(X.row(v), X.row(merged[v]));
+  }
+  EXPECT_EQ(merged_count, made);
+  for (int t = 0; t < T.rows(); ++t)
+    for (int j = 0; j < 4; ++j) EXPECT_LT(merged[T(t, j)], 0);
+  // Every tet positive at rest and in X, the tets' boundary exactly B, a closed genus-0 surface.
+  for (const MatX3d* P : {&rest, &X}) {
+    const auto q = measure_tets(*P, T);
+    EXPECT_EQ(q.inverted + q.zero_volume, 0);
+  }
+  EXPECT_EQ(sorted_faces(tet_boundary(T)), sorted_faces(B));
+  std::set<int> used;
+  for (int f = 0; f < B.rows(); ++f)
+    for (int j = 0; j < 3; ++j) used.insert(B(f, j));
+  EXPECT_EQ(static_cast<int>(used.size()) - static_cast<int>(unique_edges(B).size()) + static_cast<int>(B.rows()), 2);
+  // At rest every vertex stays where it was.
+  for (int v = 0; v < tm.V.rows(); ++v) {
+    if (merged[v] < 0) {
+      EXPECT_EQ(rest.row(v), tm.V.row(v)) << "vertex " << v;
+    }
+  }
+}
+
 TEST(Chart, CollapseTetEdgeKeepsAValidTetMeshAndItsBoundary) {
   auto b = grid_box(4);
   TetMesh tm = tet_mesh_of(b.V, b.F);

@@ -4,6 +4,7 @@
 #include <random>
 
 #include "polycube/chart/labeling.h"
+#include "polycube/core/error.h"
 #include "polycube/deform/solver.h"
 #include "polycube/deform/sparse_system.h"
 #include "polycube/examples/examples.h"
@@ -183,6 +184,61 @@ TEST(Deform, TheCrushGuardKeepsTetsFromBeingPressedFlat) {
   EXPECT_GT(under(J0, 0.2), 0);
   EXPECT_EQ(under(J1, 0.2), 0);
   EXPECT_LT(guarded.arap, 1.05 * plain.arap);
+}
+
+TEST(Deform, AResumedScheduleEndsWhereTheWholeOneDoes) {
+  // The pipeline's slim-triangle collapse stops a deformation and resumes it from the state it
+  // reached at the same schedule step (DeformOptions::start, first_alpha_step).
+  auto s = sphere(3, Vec3(1, 2, 3), 2.0);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  deform::DeformOptions first;
+  first.max_alpha_steps = 4;
+  const auto a = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, first);
+  EXPECT_EQ(a.alpha_steps, 4);
+  EXPECT_FALSE(a.converged);
+  deform::DeformOptions rest_of_it;
+  rest_of_it.start = a.X;
+  rest_of_it.first_alpha_step = 4;
+  const auto b = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, rest_of_it);
+  EXPECT_TRUE(b.converged);
+  EXPECT_EQ(b.inverted, 0);
+  EXPECT_EQ(count_charts(b.X, tm.boundary), 6);
+  // Its first record is at alpha0 x 2^4, and it starts from where the first run ended.
+  ASSERT_FALSE(b.history.empty());
+  EXPECT_NEAR(b.history.front().alpha, first.alpha0 * 16, 1e-12);
+  EXPECT_LT(b.history.front().l1_quality, a.history.front().l1_quality);
+  // The whole schedule in one run reaches the same layout.
+  const auto whole = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  EXPECT_EQ(count_charts(whole.X, tm.boundary), 6);
+  // Start positions that do not fit the mesh are an error.
+  rest_of_it.start = a.X.topRows(10);
+  EXPECT_THROW(deform::deform_to_polycube(tm.V, tm.T, tm.boundary, rest_of_it), Error);
+}
+
+TEST(Deform, TheSlimStallStopsOnlyWithSlimTriangles) {
+  // With stop_at_slim_stall, a run either ends as usual or stops at a line search cut short by the
+  // barrier while slim triangles exist, with a valid state at that step.
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  deform::DeformOptions o;
+  o.stop_at_slim_stall = true;
+  o.slim_angle_deg = 30;  // many triangles count as slim
+  const auto r = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, o);
+  EXPECT_EQ(r.inverted, 0);
+  if (r.slim_stall) {
+    EXPECT_GT(r.slim_triangles, 0);
+    EXPECT_GE(r.stall_step, 0);
+    EXPECT_EQ(r.alpha_steps, r.stall_step + 1);
+    EXPECT_FALSE(r.converged);
+  } else {
+    EXPECT_TRUE(r.converged);
+  }
+  o.slim_angle_deg = 0.1;  // nothing is that slim on a sphere: the run is the usual one
+  const auto plain = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, {});
+  const auto r2 = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, o);
+  EXPECT_FALSE(r2.slim_stall);
+  EXPECT_EQ(r2.iterations, plain.iterations);
+  EXPECT_EQ(r2.X, plain.X);
 }
 
 TEST(Deform, TorusConverges) {

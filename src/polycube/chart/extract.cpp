@@ -1004,6 +1004,91 @@ int collapse_folded_edges(const MatX3d& rest, const MatX3d& X, MatX3i& F, std::v
 
 namespace polycube::chart {
 
+int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, double min_angle_deg,
+                            std::vector<int>& merged_into, int max_rounds, int* refused, const Hooks& hooks) {
+  const int n = static_cast<int>(rest.rows());
+  merged_into.assign(n, -1);
+  const double slim_cos = std::cos(min_angle_deg * M_PI / 180.0);
+  // The smallest angle's cosine of triangle f of B in X (1 for a degenerate one).
+  auto slenderness = [&](int f) {
+    double worst = -1;
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 a = X.row(B(f, k)), b = X.row(B(f, (k + 1) % 3)), c = X.row(B(f, (k + 2) % 3));
+      const Vec3 u = b - a, w = c - a;
+      const double lu = u.norm(), lw = w.norm();
+      worst = std::max(worst, lu > 0 && lw > 0 ? u.dot(w) / (lu * lw) : 1.0);
+    }
+    return worst;
+  };
+  int made = 0;
+  std::vector<int> labels;
+  for (int round = 0; round < max_rounds; ++round) {
+    std::vector<std::pair<double, std::array<int, 3>>> slim;
+    for (int f = 0; f < B.rows(); ++f) {
+      const double c = slenderness(f);
+      if (c > slim_cos) slim.push_back({-c, {B(f, 0), B(f, 1), B(f, 2)}});
+    }
+    std::sort(slim.begin(), slim.end());
+    // Neighbours at the round's start: a collapse changes nothing outside its ends' neighbourhoods.
+    std::vector<std::vector<int>> near(n);
+    for (int t = 0; t < T.rows(); ++t)
+      for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 4; ++j) near[T(t, k)].push_back(T(t, j));
+    std::vector<char> touched(n, 0);
+    int round_made = 0, left = 0;
+    for (const auto& [c, f] : slim) {
+      if (touched[f[0]] || touched[f[1]] || touched[f[2]]) {
+        ++left;
+        continue;
+      }
+      int best = 0;
+      double shortest = std::numeric_limits<double>::infinity();
+      for (int k = 0; k < 3; ++k) {
+        const double len = (X.row(f[k]) - X.row(f[(k + 1) % 3])).norm();
+        if (len < shortest) shortest = len, best = k;
+      }
+      int keep = f[best], drop = f[(best + 1) % 3];
+      // Both ends' stars are touched either way (the tets around them are checked or changed).
+      for (int v : {keep, drop})
+        for (int u : near[v]) touched[u] = 1;
+      labels.assign(B.rows(), 0);
+      // At rest the merged vertex is one of the two input vertices (the rest boundary stays made of
+      // input vertices, on the input surface); in X it may move along the edge or inwards.
+      Vec3 at;
+      std::string why;
+      bool ok = collapse_tet_edge(rest, X, T, B, labels, keep, drop, &why, nullptr, &at);
+      if (!ok) {
+        std::string why2;
+        ok = collapse_tet_edge(rest, X, T, B, labels, drop, keep, &why2, nullptr, &at);
+        if (ok) std::swap(keep, drop);
+        else why += "; the other way: " + why2;
+      }
+      if (!ok) {
+        ++left;
+        hooks.debug("slim triangle " + std::to_string(f[0]) + "-" + std::to_string(f[1]) + "-" + std::to_string(f[2]) +
+                    " not collapsed: " + why);
+        continue;
+      }
+      X.row(keep) = at.transpose();
+      merged_into[drop] = keep;
+      ++round_made;
+    }
+    made += round_made;
+    if (refused) *refused = left;
+    if (round_made == 0) break;
+  }
+  // Merged vertices hold their partner's positions (through chains of merges).
+  for (int v = 0; v < n; ++v) {
+    int k = merged_into[v];
+    if (k < 0) continue;
+    while (merged_into[k] >= 0) k = merged_into[k];
+    merged_into[v] = k;
+    rest.row(v) = rest.row(k);
+    X.row(v) = X.row(k);
+  }
+  return made;
+}
+
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,
                        int keep, int drop, std::string* why, std::vector<int>* removed, Vec3* deformed_at,
                        Vec3* rest_at, bool deformed_may_tangle, bool rest_may_tangle) {

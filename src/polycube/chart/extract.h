@@ -158,6 +158,21 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
                        Vec3* deformed_at = nullptr, Vec3* rest_at = nullptr, bool deformed_may_tangle = false,
                        bool rest_may_tangle = false);
 
+/// The slim-triangle collapse of Huang et al. 2014 (Section 4), on the tet mesh (T over rest, outward
+/// boundary B) and its deformation X alike: for each boundary triangle with an angle under
+/// min_angle_deg in X, most slender first, its shortest edge in X is collapsed (collapse_tet_edge,
+/// either end kept where it is at rest, so that the rest boundary stays made of input vertices; in X
+/// the merged vertex may take a position of the edge, or inwards, that keeps every tet positive:
+/// X is moved there). One collapse per neighbourhood (the stars of both
+/// ends) per round, rounds until one collapses nothing (at most max_rounds). B loses the collapsed
+/// edges' triangles and T their tets; merged_into (sized rest.rows(), -1 = kept) names, per merged
+/// vertex, the vertex it went into, whose position its rows of rest and X then hold. Returns the
+/// collapses made; `refused` (optional) counts the slim triangles the last round left (all those
+/// left when it collapsed nothing).
+int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, double min_angle_deg,
+                            std::vector<int>& merged_into, int max_rounds = 10, int* refused = nullptr,
+                            const Hooks& hooks = {});
+
 /// Tet mode: prepares the boundary edge (keep, drop) for collapse_tet_edge where the link
 /// condition fails (the stars of the two ends meet outside the edge's ring): the edges from `drop`
 /// to every vertex joined to both ends but not in a tet with both, and to the vertices of every

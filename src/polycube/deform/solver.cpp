@@ -258,6 +258,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   POLYCUBE_ASSERT(scale > 0, "empty or flat mesh");
   MatX3d X = (V.rowwise() - centre) / scale;
   POLYCUBE_ASSERT(!any_inverted(X, T), "the tet mesh given to the deformation has inverted tets");
+  const bool resumed = opt.start.rows() > 0;
+  POLYCUBE_ASSERT(!resumed || opt.start.rows() == V.rows(), "the start positions do not match the mesh");
 
   Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, {}, false, {}, {}, 0, 0, {}};
   if (opt.volume_boost_factor > 1 && p.volume_weight > 0 && T.rows() > 0) p.boost.assign(T.rows(), 1.0);
@@ -315,6 +317,30 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   bool factor_valid = false, stalled = false;
   int last_cg = 0, prev_cg = 0;
   double alpha = opt.alpha0 * (p.surface ? opt.surface_alpha_scale : 1.0), eps = opt.eps0;
+  for (int k = 0; k < opt.first_alpha_step; ++k) {
+    alpha *= opt.alpha_factor;
+    eps = std::max(opt.eps_min, eps / opt.eps_factor);
+  }
+  if (resumed) {
+    X = (opt.start.rowwise() - centre) / scale;
+    POLYCUBE_ASSERT(!any_inverted(X, T), "the start positions of the deformation have inverted tets");
+  }
+  // Boundary triangles with an angle under slim_angle_deg in Y.
+  const double slim_cos = std::cos(opt.slim_angle_deg * M_PI / 180.0);
+  auto count_slim = [&](const MatX3d& Y) {
+    int n = 0;
+    for (int f = 0; f < B.rows(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const Vec3 a = Y.row(B(f, k)), b = Y.row(B(f, (k + 1) % 3)), c = Y.row(B(f, (k + 2) % 3));
+        const Vec3 u = b - a, w = c - a;
+        const double lu = u.norm(), lw = w.norm();
+        if (lu == 0 || lw == 0 || u.dot(w) > slim_cos * lu * lw) {
+          ++n;
+          break;
+        }
+      }
+    return n;
+  };
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();
   const double sqp_tolerance = opt.sqp_tolerance_for(p.surface);
   int total_iterations = 0;
@@ -322,7 +348,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   // Hessian (the Lagrangian's), see DeformOptions::lagrangian_hessian.
   double lambda_prev = 0;
   double q = quality(X, l1, p.area0);
-  for (int step = 0; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
+  for (int step = opt.first_alpha_step; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
     const double d0 = q;
     std::vector<double> changes;
@@ -419,7 +445,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       Stopwatch sw_ls;
       // Backtracking: no inverted tet, finite barrier, decrease of the energy on the constraint.
       double t = 1.0, accepted = 0;
-      int inverted_trials = 0;
+      int inverted_trials = 0, infinite_trials = 0;
       MatX3d Xt;
       Energies et;
       std::vector<int> blocking;  // tets the full step inverts
@@ -436,6 +462,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
         }
         et = evaluate(p, Xt, alpha, eps, nullptr, nullptr, false);
         ++n_ls;
+        if (!std::isfinite(et.total)) ++infinite_trials;
         if (et.total < e0.total) {
           accepted = t;
           break;
@@ -459,6 +486,23 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       // for the global weight above, left fandisk stalled); the reused factorization stays, CG
       // absorbs the change (a new factorization after each raise: same result, 26 -> 30 s).
       for (int tt : blocking) p.boost[tt] = std::min(opt.volume_boost_max, p.boost[tt] * opt.volume_boost_factor);
+      // The paper's trigger for the slim-triangle collapse: a large step cut short by the barrier.
+      if (opt.stop_at_slim_stall && !p.surface && (exhausted || accepted < 1.0 / 16) &&
+          inverted_trials + infinite_trials > 0) {
+        const int slim = count_slim(accepted > 0 ? Xt : X);
+        if (slim > opt.slim_stall_above) {
+          if (accepted > 0) X = Xt;
+          res.slim_stall = true;
+          res.slim_triangles = slim;
+          res.stall_step = step;
+          stalled = true;
+          std::ostringstream os;
+          os << "line search cut short by the barrier (step " << accepted << ") with " << slim
+             << " slim boundary triangles: stopping for their collapse";
+          hooks.debug(os.str());
+          break;
+        }
+      }
       if (exhausted) break;  // next schedule step
       if (accepted == 0) {
         // No progress along the SQP direction: stronger damping, or stop this schedule step.
@@ -625,6 +669,7 @@ DeformResult deform_with_barrier_if_pressed(const MatX3d& V, const MatX4i& T, co
 DeformResult deform_volume(const MatX3d& V, const MatX4i& T, const MatX3i& B, const DeformOptions& opt,
                            const Hooks& hooks) {
   DeformResult r = deform_with_barrier_if_pressed(V, T, B, opt, hooks);
+  if (r.slim_stall) return r;  // the caller collapses slim triangles and resumes
   // Only a schedule that went at least two steps past the rescue's start (not one cut short by
   // max_alpha_steps for a quick look) is run again.
   if (r.converged || !(opt.rescue_cg_tolerance > 0) || !(opt.rescue_cg_tolerance < opt.cg_tolerance) ||
@@ -667,6 +712,9 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   const std::vector<int> perm = locality_permutation(V, B);
   MatX3d V2(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) V2.row(perm[v]) = V.row(v);
+  DeformOptions opt2 = opt;
+  if (opt.start.rows() > 0)
+    for (int v = 0; v < V.rows(); ++v) opt2.start.row(perm[v]) = opt.start.row(v);
   // Tets in order of their smallest new vertex id (stable: ties keep the input order).
   std::vector<int> smallest(T.rows()), order(T.rows());
   for (int t = 0; t < T.rows(); ++t) {
@@ -677,7 +725,7 @@ DeformResult deform_to_polycube(const MatX3d& V, const MatX4i& T, const MatX3i& 
   MatX4i T2(T.rows(), 4);
   for (int t = 0; t < T.rows(); ++t)
     for (int k = 0; k < 4; ++k) T2(t, k) = perm[T(order[t], k)];
-  DeformResult r = deform_volume(V2, T2, B, opt, hooks);  // boundary ids are unchanged
+  DeformResult r = deform_volume(V2, T2, B, opt2, hooks);  // boundary ids are unchanged
   MatX3d X(V.rows(), 3);
   for (int v = 0; v < V.rows(); ++v) X.row(v) = r.X.row(perm[v]);
   r.X = std::move(X);

@@ -144,6 +144,22 @@ struct DeformOptions {
   /// are unchanged. Off by default: it changes the order of the sums, hence the last digits and the
   /// SQP path (rocker at 178k tets: 1.84 -> 1.21 s per SQP iteration, the assembly 314 -> 192 ms).
   bool locality_order = false;
+  /// Resuming a deformation (the pipeline's slim-triangle collapse, see below): the positions to
+  /// start from (input units, one row per vertex; empty = the rest positions V) and the schedule
+  /// step to start at (alpha = alpha0 x alpha_factor^k, eps reduced k times; max_alpha_steps counts
+  /// from 0, so the resumed run takes max_alpha_steps - k steps at most).
+  MatX3d start;
+  int first_alpha_step = 0;
+  /// The paper's slim-triangle collapse (Section 4) needs the tet mesh to change, which the caller
+  /// does (chart::collapse_slim_triangles): with this set (volume mode), a line search cut short
+  /// (a step under 1/16 of the SQP direction, or none) by tets about to invert or an infinite
+  /// barrier, while boundary triangles with an angle under slim_angle_deg exist in the deformed
+  /// mesh, ends the deformation there (DeformResult::slim_stall), to be resumed after the collapse.
+  bool stop_at_slim_stall = false;
+  double slim_angle_deg = 5.0;
+  /// ...only when there are more slim triangles than this (the resumed run: those the collapse
+  /// could not remove, so that it stops again only for new ones).
+  int slim_stall_above = 0;
 };
 
 /// One SQP iteration, for convergence plots like the paper's Fig. 3.
@@ -185,6 +201,11 @@ struct DeformResult {
   /// (-1: not needed or off), and whether its result was kept.
   double rescue_from_quality = -1;
   bool rescued = false;
+  /// DeformOptions::stop_at_slim_stall: the deformation stopped at a stall with slim boundary
+  /// triangles (slim_triangles of them) during schedule step stall_step (0-based); X is that state.
+  bool slim_stall = false;
+  int slim_triangles = 0;
+  int stall_step = 0;
   bool converged = false;    ///< l1_quality reached target_quality
   double seconds = 0;
   std::vector<IterationRecord> history;

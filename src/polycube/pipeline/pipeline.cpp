@@ -469,8 +469,75 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       deform::DeformOptions dopt = opt.deform;
       dopt.barrier_weight = barrier_weight;
       dopt.edges.insert(dopt.edges.end(), mapped.terms.begin(), mapped.terms.end());
+      dopt.stop_at_slim_stall = !opt.surface && opt.slim_collapse_rounds > 0 && dopt.edges.empty();
       dr = opt.surface ? deform::deform_surface_to_polycube(tm.V, tm.boundary, dopt, hooks)
                        : deform::deform_to_polycube(tm.V, tm.T, tm.boundary, dopt, hooks);
+      // The paper's slim-triangle collapse: collapse, then resume at the same schedule step.
+      json slim = json::array();
+      for (int round = 0; dr.slim_stall; ++round) {
+        MatX3d rest = tm.V, X = dr.X;
+        MatX4i T = tm.T;
+        MatX3i B = tm.boundary;
+        std::vector<int> merged;
+        int left = 0;
+        const int made = chart::collapse_slim_triangles(rest, X, T, B, dopt.slim_angle_deg, merged, 10, &left, hooks);
+        slim.push_back({{"schedule_step", dr.stall_step + 1}, {"iteration", dr.iterations},
+                        {"slim_triangles", dr.slim_triangles}, {"collapsed", made}, {"left", left}});
+        {
+          std::ostringstream os;
+          os << "slim-triangle collapse at schedule step " << dr.stall_step + 1 << ": " << made << " edges of "
+             << dr.slim_triangles << " slim boundary triangles collapsed";
+          hooks.info(os.str());
+        }
+        if (made > 0) {
+          // Merged vertices leave the mesh; the others keep their order.
+          const int n = static_cast<int>(rest.rows());
+          std::vector<int> o2n(n, -1);
+          int m = 0;
+          for (int v = 0; v < n; ++v)
+            if (merged[v] < 0) o2n[v] = m++;
+          MatX3d V2(m, 3), X2(m, 3);
+          for (int v = 0; v < n; ++v)
+            if (o2n[v] >= 0) {
+              V2.row(o2n[v]) = rest.row(v);
+              X2.row(o2n[v]) = X.row(v);
+            }
+          for (Eigen::Index t = 0; t < T.rows(); ++t)
+            for (int k = 0; k < 4; ++k) T(t, k) = o2n[T(t, k)];
+          for (Eigen::Index f = 0; f < B.rows(); ++f)
+            for (int k = 0; k < 3; ++k) B(f, k) = o2n[B(f, k)];
+          for (int& v : surf_to_tet) v = v >= 0 ? o2n[v] : -1;
+          tm.V = std::move(V2);
+          tm.T = std::move(T);
+          tm.boundary = std::move(B);
+          X = std::move(X2);
+        }
+        deform::DeformOptions resume = dopt;
+        resume.start = X;
+        resume.first_alpha_step = dr.stall_step;
+        // It stops again only for more slim triangles than the collapse left.
+        resume.stop_at_slim_stall = round + 1 < opt.slim_collapse_rounds;
+        resume.slim_stall_above = left;
+        deform::DeformResult next = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, resume, hooks);
+        // One record of the whole deformation.
+        next.iterations += dr.iterations;
+        next.factorizations += dr.factorizations;
+        next.seconds += dr.seconds;
+        next.rotation = next.rotation * dr.rotation;
+        for (auto& h : next.history) {
+          h.iteration += dr.iterations;
+          h.seconds += dr.seconds;
+        }
+        next.history.insert(next.history.begin(), dr.history.begin(), dr.history.end());
+        dr = std::move(next);
+      }
+      if (!slim.empty()) {
+        // tetmesh.* and deformed.* stay a pair.
+        write_tetmesh(tm.V, tm.T, tm.boundary);
+        report["tetmesh"]["vertices"] = tm.V.rows();
+        report["tetmesh"]["tets"] = tm.T.rows();
+        report["tetmesh"]["boundary_triangles"] = tm.boundary.rows();
+      }
       if (!mapped.terms.empty()) {
         // Final normal angle per constrained edge (90 for a polycube edge, 0 inside a face).
         const std::vector<double> ang = constraints::normal_angles_deg(mapped, dr.X, tm.boundary, pairs);
@@ -515,6 +582,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"stall_rescue", {{"ran", dr.rescue_from_quality >= 0},
                                    {"l1_quality_before", dr.rescue_from_quality},
                                    {"kept", dr.rescued}}},
+                 {"slim_collapse", slim},
                  {"thickness_pairs", dr.thickness_pairs},
                  {"thin_crushed", dr.thin_crushed},
                  {"thin_crushed_after", dr.thin_crushed_after}};
@@ -533,6 +601,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"volume_barrier_form", opt.deform.neutral_volume_barrier ? "neutral" : "log"},
                        {"locality_order", opt.deform.locality_order},
                        {"volume_boost", opt.deform.volume_boost_factor},
+                       {"slim_collapse_rounds", opt.slim_collapse_rounds},
+                       {"slim_angle_deg", opt.deform.slim_angle_deg},
                        {"crush_guard", opt.deform.crush_guard_weight},
                        {"crush_guard_ratio", opt.deform.crush_guard_ratio},
                        {"rescue_cg_tolerance", opt.deform.rescue_cg_tolerance},

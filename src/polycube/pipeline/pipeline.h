@@ -74,6 +74,16 @@ struct PipelineOptions {
   /// the inverted tets). A diagnosis, not a result: the run still fails (exit code 7), the file is
   /// named as such and removed by the next run in that folder. Off by default.
   bool write_failed = false;
+  /// Volume mode, the paper's slim-triangle collapse (Section 4): when the deformation's line
+  /// search is cut short by the barrier while boundary triangles have an angle under
+  /// deform.slim_angle_deg (DeformOptions::stop_at_slim_stall), their shortest edges are
+  /// collapsed in the tet mesh, at rest and in the deformed mesh alike
+  /// (chart::collapse_slim_triangles), and the deformation resumes from that state at the same
+  /// schedule step, at most this many times (0 = off; off as well with edge constraints, which
+  /// name boundary triangle pairs). The tet mesh then has fewer vertices and triangles than the
+  /// input surface: tetmesh.* is written again, and labels.txt and map.obj reach the input's
+  /// triangles and vertices through the closest point at rest.
+  int slim_collapse_rounds = 0;
   bool vtk_binary = false;     ///< VTK outputs in BINARY instead of ASCII
   io::CadOptions cad;
   ValidateOptions validate;
