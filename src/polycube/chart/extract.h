@@ -163,7 +163,8 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
 /// min_angle_deg in X, most slender first, its shortest edge in X is collapsed (collapse_tet_edge,
 /// either end kept where it is at rest, so that the rest boundary stays made of input vertices; in X
 /// the merged vertex may take a position of the edge, or inwards, that keeps every tet positive:
-/// X is moved there). One collapse per neighbourhood (the stars of both
+/// X is moved there; a collapse that leaves a tet around it under deform::DeformResult::kCrushedRatio
+/// of its rest volume in X is undone). One collapse per neighbourhood (the stars of both
 /// ends) per round, rounds until one collapses nothing (at most max_rounds). B loses the collapsed
 /// edges' triangles and T their tets; merged_into (sized rest.rows(), -1 = kept) names, per merged
 /// vertex, the vertex it went into, whose position its rows of rest and X then hold. Returns the

@@ -348,6 +348,11 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   // Hessian (the Lagrangian's), see DeformOptions::lagrangian_hessian.
   double lambda_prev = 0;
   double q = quality(X, l1, p.area0);
+  if (resumed) {
+    double s0 = 0, a0 = 0;
+    l1_measure(X, B, s0, a0);
+    q = quality(X, s0, a0);
+  }
   for (int step = opt.first_alpha_step; step < opt.max_alpha_steps && q >= opt.target_quality && !stalled; ++step) {
     res.alpha_steps = step + 1;
     const double d0 = q;
@@ -490,7 +495,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       if (opt.stop_at_slim_stall && !p.surface && (exhausted || accepted < 1.0 / 16) &&
           inverted_trials + infinite_trials > 0) {
         const int slim = count_slim(accepted > 0 ? Xt : X);
-        if (slim > opt.slim_stall_above) {
+        if (slim > 0) {
           if (accepted > 0) X = Xt;
           res.slim_stall = true;
           res.slim_triangles = slim;

@@ -157,9 +157,6 @@ struct DeformOptions {
   /// mesh, ends the deformation there (DeformResult::slim_stall), to be resumed after the collapse.
   bool stop_at_slim_stall = false;
   double slim_angle_deg = 5.0;
-  /// ...only when there are more slim triangles than this (the resumed run: those the collapse
-  /// could not remove, so that it stops again only for new ones).
-  int slim_stall_above = 0;
 };
 
 /// One SQP iteration, for convergence plots like the paper's Fig. 3.

@@ -474,6 +474,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        : deform::deform_to_polycube(tm.V, tm.T, tm.boundary, dopt, hooks);
       // The paper's slim-triangle collapse: collapse, then resume at the same schedule step.
       json slim = json::array();
+      const TetMesh tm_before = dr.slim_stall ? tm : TetMesh{};
+      const std::vector<int> surf_to_tet_before = surf_to_tet;
       for (int round = 0; dr.slim_stall; ++round) {
         MatX3d rest = tm.V, X = dr.X;
         MatX4i T = tm.T;
@@ -515,9 +517,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         deform::DeformOptions resume = dopt;
         resume.start = X;
         resume.first_alpha_step = dr.stall_step;
-        // It stops again only for more slim triangles than the collapse left.
-        resume.stop_at_slim_stall = round + 1 < opt.slim_collapse_rounds;
-        resume.slim_stall_above = left;
+        // It stops again while collapses are made (homer stopped 7 times when it also stopped for
+        // new slim triangles after a round that collapsed nothing, and its deformation then stalled
+        // at l1_quality 9.8e-3).
+        resume.stop_at_slim_stall = made > 0 && round + 1 < opt.slim_collapse_rounds;
         deform::DeformResult next = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, resume, hooks);
         // One record of the whole deformation.
         next.iterations += dr.iterations;
@@ -530,6 +533,23 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         }
         next.history.insert(next.history.begin(), dr.history.begin(), dr.history.end());
         dr = std::move(next);
+      }
+      if (!slim.empty() && !dr.converged) {
+        // The collapsed mesh did not reach the target: the deformation without the collapse, from
+        // rest on the input's tet mesh, and the better of the two is kept.
+        hooks.info("the deformation with the slim-triangle collapse stopped at l1_quality " +
+                   std::to_string(dr.l1_quality) + ": deforming again without it");
+        deform::DeformOptions plain = dopt;
+        plain.stop_at_slim_stall = false;
+        deform::DeformResult again = deform::deform_to_polycube(tm_before.V, tm_before.T, tm_before.boundary, plain, hooks);
+        const bool better = again.inverted == 0 && again.l1_quality < dr.l1_quality;
+        slim.push_back({{"undone", better}, {"l1_quality_with", dr.l1_quality}, {"l1_quality_without", again.l1_quality}});
+        if (better) {
+          again.seconds += dr.seconds;
+          dr = std::move(again);
+          tm = tm_before;
+          surf_to_tet = surf_to_tet_before;
+        }
       }
       if (!slim.empty()) {
         // tetmesh.* and deformed.* stay a pair.
