@@ -1057,42 +1057,39 @@ int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, doubl
       // input vertices, on the input surface); in X it may move along the edge or inwards.
       Vec3 at;
       std::string why;
-      const MatX4i T0 = T;
-      const MatX3i B0 = B;
-      // A collapse is kept only if no tet around the merged vertex is left nearly flat in X (under
-      // kCrushedRatio of its rest volume): such tets block the resumed deformation.
+      // A collapse is kept only if no tet around the merged vertex k, at `at`, is left nearly flat in
+      // X (under kCrushedRatio of its rest volume): such tets block the resumed deformation.
       auto crushes = [&](int k) {
-        MatX3d Y = X;
-        Y.row(k) = at.transpose();
+        auto x = [&](int v) -> Vec3 { return v == k ? at : Vec3(X.row(v).transpose()); };
         for (int t = 0; t < T.rows(); ++t) {
           if (T(t, 0) != k && T(t, 1) != k && T(t, 2) != k && T(t, 3) != k) continue;
           const Vec3 a = rest.row(T(t, 0)), b = rest.row(T(t, 1)), c = rest.row(T(t, 2)), d = rest.row(T(t, 3));
-          const Vec3 p = Y.row(T(t, 0)), q = Y.row(T(t, 1)), r = Y.row(T(t, 2)), u = Y.row(T(t, 3));
+          const Vec3 p = x(T(t, 0)), q = x(T(t, 1)), r = x(T(t, 2)), u = x(T(t, 3));
           const double vr = (b - a).dot((c - a).cross(d - a)), vx = (q - p).dot((r - p).cross(u - p));
           if (vx < deform::DeformResult::kCrushedRatio * vr) return true;
         }
         return false;
       };
-      bool ok = collapse_tet_edge(rest, X, T, B, labels, keep, drop, &why, nullptr, &at);
-      if (ok && crushes(keep)) {
-        ok = false;
-        why = "a tet would be left nearly flat in the deformed mesh";
+      // Collapses (k, d), undone if it crushes a tet; `reason` says why it was not made.
+      const MatX4i T0 = T;
+      const MatX3i B0 = B;
+      auto attempt = [&](int k, int d, std::string& reason) {
+        if (!collapse_tet_edge(rest, X, T, B, labels, k, d, &reason, nullptr, &at)) return false;
+        if (!crushes(k)) return true;
+        reason = "a tet would be left nearly flat in the deformed mesh";
         T = T0;
         B = B0;
         labels.assign(B.rows(), 0);
-      }
+        return false;
+      };
+      bool ok = attempt(keep, drop, why);
       if (!ok) {
         std::string why2;
-        ok = collapse_tet_edge(rest, X, T, B, labels, drop, keep, &why2, nullptr, &at);
-        if (ok && crushes(drop)) {
-          ok = false;
-          why2 = "a tet would be left nearly flat in the deformed mesh";
-          T = T0;
-          B = B0;
-          labels.assign(B.rows(), 0);
-        }
-        if (ok) std::swap(keep, drop);
-        else why += "; the other way: " + why2;
+        ok = attempt(drop, keep, why2);
+        if (ok)
+          std::swap(keep, drop);
+        else
+          why += "; the other way: " + why2;
       }
       if (!ok) {
         ++left;

@@ -475,7 +475,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
       // The paper's slim-triangle collapse: collapse, then resume at the same schedule step.
       json slim = json::array();
       const TetMesh tm_before = dr.slim_stall ? tm : TetMesh{};
-      const std::vector<int> surf_to_tet_before = surf_to_tet;
+      const std::vector<int> surf_to_tet_before = dr.slim_stall ? surf_to_tet : std::vector<int>{};
       for (int round = 0; dr.slim_stall; ++round) {
         MatX3d rest = tm.V, X = dr.X;
         MatX4i T = tm.T;
