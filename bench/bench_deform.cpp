@@ -332,18 +332,10 @@ int main(int argc, char** argv) {
         SurfaceLayout l;
         validate_surface(in, l);
         SurfaceMesh s{in.V, in.F};
-        // Aimed at the paper's count within 5% (the library's own adjustment stops within 20-25%:
-        // rocker came out at 153k tets for the paper's 128k), in up to three more meshings, each
-        // scaling the requested count by the ratio missed.
-        const int target = static_cast<int>(m.tets * tet_scale);
+        // The library aims at the count after split_boundary_tets, within 5% (TetOptions::target_tets).
         TetOptions o;
-        o.target_tets = target;
+        o.target_tets = static_cast<int>(m.tets * tet_scale);
         tm = tetrahedralize(s, l, o, {});
-        for (int again = 0; again < 3 && std::abs(static_cast<double>(tm.T.rows()) / target - 1) > 0.05; ++again) {
-          o.target_tets = std::max(1, static_cast<int>(std::lround(static_cast<double>(o.target_tets) * target /
-                                                                   static_cast<double>(tm.T.rows()))));
-          tm = tetrahedralize(s, l, o, {});
-        }
       }
       split_boundary_tets(tm);
       std::string p1 = "-", p2 = "-", p3 = "-", p4 = "-", p5 = "-";

@@ -264,8 +264,31 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
   double h = opt.max_size > 0 ? opt.max_size * diag : 0;
   if (opt.target_tets > 0) h = size_for(opt.target_tets);
 
-  TetMesh tm;
-  for (int attempt = 0; attempt < 2; ++attempt) {
+  // Surface vertices (tetrahedralize keeps them first): tets with four of them are split into four
+  // by the pipeline (split_boundary_tets), so that target_tets counts 3 more tets per such tet.
+  std::vector<char> on_surface(s.V.rows(), 0);
+  for (int f = 0; f < s.F.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_surface[s.F(f, k)] = 1;
+  auto counted = [&](const TetMesh& m) {
+    Eigen::Index n = m.T.rows();
+    for (Eigen::Index t = 0; t < m.T.rows(); ++t) {
+      bool all = true;
+      for (int k = 0; k < 4 && all; ++k) {
+        const int v = m.T(t, k);
+        all = v < static_cast<int>(on_surface.size()) && on_surface[v];
+      }
+      if (all) n += 3;
+    }
+    return static_cast<double>(n);
+  };
+  // Meshed again (up to kRuns in all) until the count is within kBand of target_tets: the first
+  // size comes from the volume alone, the next from the count missed (N ~ h^-3 at first, then the
+  // exponent measured between the last two runs: the kept surface's share does not scale).
+  constexpr int kRuns = 4;
+  constexpr double kBand = 0.05;
+  TetMesh tm, best;
+  double best_miss = -1, prev_h = 0, prev_n = 0;
+  for (int attempt = 0; attempt < kRuns; ++attempt) {
     st.attempts++;
     io::GmshSession g;
     std::string failure;
@@ -335,14 +358,25 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
       tm.T(static_cast<Eigen::Index>(i / 4), static_cast<Eigen::Index>(i % 4)) = it->second;
     }
     hooks.report("tet", 0.9);
-    if (opt.target_tets > 0 && attempt == 0) {
-      const double ratio = static_cast<double>(tm.T.rows()) / opt.target_tets;
-      if (ratio < 0.8 || ratio > 1.25) {
-        hooks.debug("tet count " + std::to_string(tm.T.rows()) + " vs target " + std::to_string(opt.target_tets) +
-                    ": adjusting the size and meshing again");
-        h *= std::cbrt(ratio);
+    if (opt.target_tets > 0) {
+      const double n = counted(tm);
+      const double miss = std::abs(std::log(n / opt.target_tets));
+      if (best_miss < 0 || miss < best_miss) {
+        best_miss = miss;
+        best = tm;
+      }
+      if (std::abs(n / opt.target_tets - 1) > kBand && attempt + 1 < kRuns) {
+        double exponent = -3;  // N ~ h^exponent
+        if (prev_h > 0 && prev_h != h && prev_n > 0 && prev_n != n)
+          exponent = std::clamp(std::log(n / prev_n) / std::log(h / prev_h), -4.0, -1.0);
+        hooks.debug("tet count " + std::to_string(static_cast<long>(n)) + " (after the boundary tets' splits) vs target " +
+                    std::to_string(opt.target_tets) + ": adjusting the size and meshing again");
+        prev_h = h;
+        prev_n = n;
+        h *= std::pow(opt.target_tets / n, 1 / exponent);
         continue;
       }
+      tm = std::move(best);
     }
     break;
   }

@@ -22,7 +22,10 @@ struct TetOptions {
   /// the boundary (Gmsh's default), or follow target_tets.
   double max_size = 0;
   /// > 0: aim for about this many tets (sets the interior size, and the surface size when
-  /// remeshing without edge_length). The kept input surface puts a floor under the count.
+  /// remeshing without edge_length), counted after split_boundary_tets (3 more per tet with four
+  /// boundary vertices), so that the mesh the deformation gets has this count. Gmsh runs again (4
+  /// runs at most) until the count is within 5%; the closest is kept. The kept input surface puts
+  /// a floor under the count.
   int target_tets = 0;
   /// "delaunay" (Gmsh's default 3D Delaunay) or "hxt" (Gmsh's parallel Delaunay, faster on large
   /// meshes; if its result fails the checks, the mesh is made again with "delaunay").
@@ -39,7 +42,7 @@ struct TetStats {
   int surface_vertices = 0;       ///< vertices on the boundary of the result
   int surface_triangles = 0;
   TetQuality quality;
-  int attempts = 0;               ///< Gmsh runs (target_tets may need a second one)
+  int attempts = 0;               ///< Gmsh runs (target_tets may need up to four)
   std::string algorithm;          ///< algorithm of the accepted mesh (HXT falls back to Delaunay)
 };
 
