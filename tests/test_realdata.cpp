@@ -151,9 +151,10 @@ INSTANTIATE_TEST_SUITE_P(SharedMeshes, RealPolycube,
 // a chart-border vertex 1.8e-4 from the corner of its own polycube edge, on the wrong side): an
 // exact polycube with a valid chart graph, no inverted tet, the collapse reported, and the map of
 // every input vertex in it (the merged vertex on its partner). About 3 minutes on 2 cores.
-// At `--tets 20000` (17.4k tets): the same deformation and polycube on the two machines this was
-// run on (46 charts, 84 corners, ARAP 0.078); at the default resolution an AMD EPYC's rounding
-// takes the deformation elsewhere, to a polycube with 2 tets nearly flat and ARAP 0.186.
+// At `--tets 20000` (17.4k tets until the forty-fifth session, 20759 since --tets counts the
+// boundary tets' splits): 46 charts, 84 corners, ARAP 0.078 (0.0761 at 20759, 5 edge collapses);
+// at the default resolution an AMD EPYC's rounding takes the deformation elsewhere, to a polycube
+// with 2 tets nearly flat and ARAP 0.186.
 TEST(RealPolycubeOrganic, SpotIsRealizedWithThePinnedEdgeCollapsed) {
   const std::string path = shared_dir() + "/meshes/organic/spot.obj";
   if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
