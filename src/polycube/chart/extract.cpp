@@ -10,9 +10,9 @@
 #include <tuple>
 
 #include "polycube/core/error.h"
-#include "polycube/deform/solver.h"
 #include "polycube/core/topology.h"
 #include "polycube/deform/energies.h"
+#include "polycube/deform/solver.h"
 #include "polycube/validate/tetmesh.h"
 
 namespace polycube::chart {
@@ -237,24 +237,14 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
                              const std::vector<int>& merged, const std::vector<int>& rows, const RealizeOptions& ro) {
     // The work mesh's vertices: the input's, then those of edges split for collapses.
     const int n = static_cast<int>(cur_rest.rows());
-    std::vector<int> o2n(n, -1), n2o;
-    for (int v = 0; v < n; ++v)
-      if (merged[v] < 0) {
-        o2n[v] = static_cast<int>(n2o.size());
-        n2o.push_back(v);
-      }
-    const int m = static_cast<int>(n2o.size());
-    MatX3d R(m, 3), D(m, 3);
-    for (int i = 0; i < m; ++i) {
-      R.row(i) = cur_rest.row(n2o[i]);
-      D.row(i) = cur_def.row(n2o[i]);
-    }
+    MatX3d R = cur_rest, D = cur_def.topRows(n);
     MatX4i TT = CT;
-    for (int t = 0; t < TT.rows(); ++t)
-      for (int j = 0; j < 4; ++j) TT(t, j) = o2n[CT(t, j)];
     MatX3i BB = CB;
-    for (int f = 0; f < BB.rows(); ++f)
-      for (int j = 0; j < 3; ++j) BB(f, j) = o2n[CB(f, j)];
+    const std::vector<int> o2n = drop_merged_vertices(merged, {&R, &D}, TT, BB);
+    std::vector<int> n2o;
+    for (int v = 0; v < n; ++v)
+      if (o2n[v] >= 0) n2o.push_back(v);
+    const int m = static_cast<int>(n2o.size());
     // Messages name vertices and triangles as in the work mesh (the input's numbering, then the
     // split vertices), not the compacted copy's.
     RealizeOptions named = ro;
@@ -1010,23 +1000,12 @@ int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, doubl
   const int n = static_cast<int>(rest.rows());
   merged_into.assign(n, -1);
   const double slim_cos = std::cos(min_angle_deg * M_PI / 180.0);
-  // The smallest angle's cosine of triangle f of B in X (1 for a degenerate one).
-  auto slenderness = [&](int f) {
-    double worst = -1;
-    for (int k = 0; k < 3; ++k) {
-      const Vec3 a = X.row(B(f, k)), b = X.row(B(f, (k + 1) % 3)), c = X.row(B(f, (k + 2) % 3));
-      const Vec3 u = b - a, w = c - a;
-      const double lu = u.norm(), lw = w.norm();
-      worst = std::max(worst, lu > 0 && lw > 0 ? u.dot(w) / (lu * lw) : 1.0);
-    }
-    return worst;
-  };
   int made = 0;
   std::vector<int> labels;
   for (int round = 0; round < max_rounds; ++round) {
     std::vector<std::pair<double, std::array<int, 3>>> slim;
     for (int f = 0; f < B.rows(); ++f) {
-      const double c = slenderness(f);
+      const double c = deform::smallest_angle_cos(X, B(f, 0), B(f, 1), B(f, 2));
       if (c > slim_cos) slim.push_back({-c, {B(f, 0), B(f, 1), B(f, 2)}});
     }
     std::sort(slim.begin(), slim.end());
@@ -1115,6 +1094,25 @@ int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, doubl
     X.row(v) = X.row(k);
   }
   return made;
+}
+
+std::vector<int> drop_merged_vertices(const std::vector<int>& merged_into, std::initializer_list<MatX3d*> positions,
+                                      MatX4i& T, MatX3i& B) {
+  const int n = static_cast<int>(merged_into.size());
+  std::vector<int> o2n(n, -1);
+  int m = 0;
+  for (int v = 0; v < n; ++v)
+    if (merged_into[v] < 0) o2n[v] = m++;
+  for (MatX3d* P : positions) {
+    for (int v = 0; v < n; ++v)
+      if (o2n[v] >= 0 && o2n[v] != v) P->row(o2n[v]) = P->row(v);  // o2n[v] <= v: in place
+    P->conservativeResize(m, 3);
+  }
+  for (Eigen::Index t = 0; t < T.rows(); ++t)
+    for (int k = 0; k < 4; ++k) T(t, k) = o2n[T(t, k)];
+  for (Eigen::Index f = 0; f < B.rows(); ++f)
+    for (int k = 0; k < 3; ++k) B(f, k) = o2n[B(f, k)];
+  return o2n;
 }
 
 bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, MatX3i& B, std::vector<int>& labels,

@@ -1,6 +1,7 @@
 // The polycube stage as one call: label the deformed boundary, clean the labels up, check the
 // chart graph, realize the exact polycube (labeling.h, realize.h).
 #pragma once
+#include <initializer_list>
 #include <memory>
 #include <string>
 #include <vector>
@@ -173,6 +174,12 @@ bool collapse_tet_edge(const MatX3d& rest, const MatX3d& deformed, MatX4i& T, Ma
 int collapse_slim_triangles(MatX3d& rest, MatX3d& X, MatX4i& T, MatX3i& B, double min_angle_deg,
                             std::vector<int>& merged_into, int max_rounds = 10, int* refused = nullptr,
                             const Hooks& hooks = {});
+
+/// Removes the merged vertices (merged_into[v] >= 0, as the collapses leave them) from the
+/// per-vertex rows of each of `positions` (the others keep their order) and renumbers T and B.
+/// Returns, per old vertex, its new index (-1 for a merged one).
+std::vector<int> drop_merged_vertices(const std::vector<int>& merged_into, std::initializer_list<MatX3d*> positions,
+                                      MatX4i& T, MatX3i& B);
 
 /// Tet mode: prepares the boundary edge (keep, drop) for collapse_tet_edge where the link
 /// condition fails (the stars of the two ends meet outside the edge's ring): the edges from `drop`

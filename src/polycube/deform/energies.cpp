@@ -143,6 +143,17 @@ Vec3 area_normal(const MatX3d& X, int a, int b, int c) {
   return 0.5 * (row(X, b) - row(X, a)).cross(row(X, c) - row(X, a));
 }
 
+double smallest_angle_cos(const MatX3d& X, int a, int b, int c) {
+  const int v[3] = {a, b, c};
+  double worst = -1;
+  for (int k = 0; k < 3; ++k) {
+    const Vec3 p = row(X, v[k]), u = row(X, v[(k + 1) % 3]) - p, w = row(X, v[(k + 2) % 3]) - p;
+    const double lu = u.norm(), lw = w.norm();
+    worst = std::max(worst, lu > 0 && lw > 0 ? u.dot(w) / (lu * lw) : 1.0);
+  }
+  return worst;
+}
+
 double l1_energy(const MatX3d& X, const MatX3i& F, double eps, double weight, Eigen::VectorXd* grad,
                  HessianSink* hess, bool project, double area_multiplier) {
   double E = 0;

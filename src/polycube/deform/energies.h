@@ -43,6 +43,10 @@ std::vector<FacePair> face_pairs(const MatX3i& F);
 /// Area-weighted normal of triangle (a, b, c): N = (b - a) x (c - a) / 2; |N| is the area.
 Vec3 area_normal(const MatX3d& X, int a, int b, int c);
 
+/// Cosine of the smallest angle of triangle (a, b, c) (1 for a degenerate one): the triangle is
+/// slim under angle A where this exceeds cos A (the slim-triangle collapse, Section 4).
+double smallest_angle_cos(const MatX3d& X, int a, int b, int c);
+
 /// Smoothed l1 energy (Eq. 2 with |c| ~ sqrt(c^2 + eps), Eqs. 4-5):
 ///   sum_f A_f sum_k sqrt(n_fk^2 + eps) = sum_f sum_k sqrt(N_fk^2 + eps |N_f|^2).
 /// Hessian: per triangle, the second term of Eq. 5 projected to PSD by clamping its eigenvalues

@@ -329,16 +329,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   const double slim_cos = std::cos(opt.slim_angle_deg * M_PI / 180.0);
   auto count_slim = [&](const MatX3d& Y) {
     int n = 0;
-    for (int f = 0; f < B.rows(); ++f)
-      for (int k = 0; k < 3; ++k) {
-        const Vec3 a = Y.row(B(f, k)), b = Y.row(B(f, (k + 1) % 3)), c = Y.row(B(f, (k + 2) % 3));
-        const Vec3 u = b - a, w = c - a;
-        const double lu = u.norm(), lw = w.norm();
-        if (lu == 0 || lw == 0 || u.dot(w) > slim_cos * lu * lw) {
-          ++n;
-          break;
-        }
-      }
+    for (int f = 0; f < B.rows(); ++f) n += smallest_angle_cos(Y, B(f, 0), B(f, 1), B(f, 2)) > slim_cos;
     return n;
   };
   Eigen::Matrix3d R_total = Eigen::Matrix3d::Identity();

@@ -493,26 +493,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         }
         if (made > 0) {
           // Merged vertices leave the mesh; the others keep their order.
-          const int n = static_cast<int>(rest.rows());
-          std::vector<int> o2n(n, -1);
-          int m = 0;
-          for (int v = 0; v < n; ++v)
-            if (merged[v] < 0) o2n[v] = m++;
-          MatX3d V2(m, 3), X2(m, 3);
-          for (int v = 0; v < n; ++v)
-            if (o2n[v] >= 0) {
-              V2.row(o2n[v]) = rest.row(v);
-              X2.row(o2n[v]) = X.row(v);
-            }
-          for (Eigen::Index t = 0; t < T.rows(); ++t)
-            for (int k = 0; k < 4; ++k) T(t, k) = o2n[T(t, k)];
-          for (Eigen::Index f = 0; f < B.rows(); ++f)
-            for (int k = 0; k < 3; ++k) B(f, k) = o2n[B(f, k)];
+          const std::vector<int> o2n = chart::drop_merged_vertices(merged, {&rest, &X}, T, B);
           for (int& v : surf_to_tet) v = v >= 0 ? o2n[v] : -1;
-          tm.V = std::move(V2);
+          tm.V = std::move(rest);
           tm.T = std::move(T);
           tm.boundary = std::move(B);
-          X = std::move(X2);
         }
         deform::DeformOptions resume = dopt;
         resume.start = X;

@@ -78,6 +78,18 @@ std::vector<int> add_surfaces(const SurfaceMesh& s, const std::vector<std::vecto
   throw Error(ErrorKind::Tetrahedralization, "tetrahedralization failed: " + gmsh_message);
 }
 
+// Tets of tm whose four vertices are all on tm.boundary (split_boundary_tets splits them).
+std::vector<int> boundary_only_tets(const TetMesh& tm) {
+  std::vector<char> on_boundary(tm.V.rows(), 0);
+  for (int f = 0; f < tm.boundary.rows(); ++f)
+    for (int k = 0; k < 3; ++k) on_boundary[tm.boundary(f, k)] = 1;
+  std::vector<int> tets;
+  for (int t = 0; t < tm.T.rows(); ++t)
+    if (on_boundary[tm.T(t, 0)] && on_boundary[tm.T(t, 1)] && on_boundary[tm.T(t, 2)] && on_boundary[tm.T(t, 3)])
+      tets.push_back(t);
+  return tets;
+}
+
 }  // namespace
 
 void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::string& name) {
@@ -114,13 +126,7 @@ void check_tet_mesh(const TetMesh& tm, const SurfaceMesh* surface, const std::st
 }
 
 int split_boundary_tets(TetMesh& tm) {
-  std::vector<char> on_boundary(tm.V.rows(), 0);
-  for (int f = 0; f < tm.boundary.rows(); ++f)
-    for (int k = 0; k < 3; ++k) on_boundary[tm.boundary(f, k)] = 1;
-  std::vector<int> split;
-  for (int t = 0; t < tm.T.rows(); ++t)
-    if (on_boundary[tm.T(t, 0)] && on_boundary[tm.T(t, 1)] && on_boundary[tm.T(t, 2)] && on_boundary[tm.T(t, 3)])
-      split.push_back(t);
+  const std::vector<int> split = boundary_only_tets(tm);
   if (split.empty()) return 0;
   const Eigen::Index nv = tm.V.rows(), nt = tm.T.rows();
   tm.V.conservativeResize(nv + static_cast<Eigen::Index>(split.size()), 3);
@@ -264,22 +270,10 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
   double h = opt.max_size > 0 ? opt.max_size * diag : 0;
   if (opt.target_tets > 0) h = size_for(opt.target_tets);
 
-  // Surface vertices (tetrahedralize keeps them first): tets with four of them are split into four
-  // by the pipeline (split_boundary_tets), so that target_tets counts 3 more tets per such tet.
-  std::vector<char> on_surface(s.V.rows(), 0);
-  for (int f = 0; f < s.F.rows(); ++f)
-    for (int k = 0; k < 3; ++k) on_surface[s.F(f, k)] = 1;
+  // Tets with four boundary vertices are split into four by the pipeline (split_boundary_tets), so
+  // that target_tets counts 3 more tets per such tet.
   auto counted = [&](const TetMesh& m) {
-    Eigen::Index n = m.T.rows();
-    for (Eigen::Index t = 0; t < m.T.rows(); ++t) {
-      bool all = true;
-      for (int k = 0; k < 4 && all; ++k) {
-        const int v = m.T(t, k);
-        all = v < static_cast<int>(on_surface.size()) && on_surface[v];
-      }
-      if (all) n += 3;
-    }
-    return static_cast<double>(n);
+    return static_cast<double>(m.T.rows() + 3 * static_cast<Eigen::Index>(boundary_only_tets(m).size()));
   };
   // Meshed again (up to kRuns in all) until the count is within kBand of target_tets: the first
   // size comes from the volume alone, the next from the count missed (N ~ h^-3 at first, then the
@@ -357,6 +351,7 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
       POLYCUBE_ASSERT(it != id.end(), "tet node without coordinates");
       tm.T(static_cast<Eigen::Index>(i / 4), static_cast<Eigen::Index>(i % 4)) = it->second;
     }
+    tm.boundary = s.F;  // the surface's vertices come first, unchanged
     hooks.report("tet", 0.9);
     if (opt.target_tets > 0) {
       const double n = counted(tm);
@@ -396,7 +391,6 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
     return r;
   }
   st.algorithm = opt.algorithm;
-  tm.boundary = s.F;
   st.surface_vertices = static_cast<int>(s.V.rows());
   st.surface_triangles = static_cast<int>(s.F.rows());
   st.quality = measure_tets(tm.V, tm.T);
