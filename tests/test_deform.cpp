@@ -323,6 +323,42 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
   EXPECT_LE((x1 - e1).norm(), 1e-4 * e1.norm());
 }
 
+// The cached value positions (tets, boundary triangles and boundary pairs, with the next
+// element's values fetched ahead) add exactly what the index search adds, in the order given
+// and out of it.
+TEST(SparseSystem, CachedAssemblyMatchesTheIndexSearchBitForBit) {
+  const auto s = sphere(2);
+  const TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
+  const MatX3i& F = tm.boundary;
+  const std::vector<deform::FacePair> pairs = deform::face_pairs(F);
+  std::vector<std::vector<int>> elements;
+  for (int t = 0; t < tm.T.rows(); ++t) elements.push_back({tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)});
+  for (int f = 0; f < F.rows(); ++f) elements.push_back({F(f, 0), F(f, 1), F(f, 2)});
+  for (const deform::FacePair& fp : pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
+  const int n = static_cast<int>(tm.V.rows());
+  deform::SparseSystem searched(n, elements), cached(n, elements);
+  cached.cache_elements(elements);
+  // A deformed state (so that every term has a Hessian of its own), and the triangles reversed.
+  MatX3d X = tm.V;
+  for (int v = 0; v < n; ++v) X(v, 0) *= 1.0 + 0.2 * X(v, 1) * X(v, 1);
+  const MatX3i Frev = F.colwise().reverse();
+  const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
+  std::vector<double> side(cached.values().size(), 0.0), side_searched(side.size(), 0.0);
+  deform::SparseSystem::Buffer buffer(cached, side), buffer_searched(searched, side_searched);
+  for (deform::SparseSystem* sys : {&searched, &cached}) {
+    deform::arap_energy(X, tm.T, rest, 1.0, nullptr, sys);
+    deform::l1_energy(X, F, 0.05, 10.0, nullptr, sys);
+    deform::barrier_energy(X, F, pairs, 0.01, nullptr, sys);
+    deform::complexity_energy(X, F, pairs, 1.0, nullptr, sys);
+    deform::l1_energy(X, Frev, 0.05, 3.0, nullptr, sys);  // out of order
+  }
+  deform::volume_barrier_energy(X, tm.T, rest, 0.1, nullptr, &buffer);
+  deform::volume_barrier_energy(X, tm.T, rest, 0.1, nullptr, &buffer_searched);
+  EXPECT_TRUE(searched.values() == cached.values());
+  EXPECT_TRUE(side == side_searched);
+  EXPECT_GT(*std::max_element(side.begin(), side.end()), 0.0);
+}
+
 // The preconditioner's single-precision copy of a supernodal factor solves the system to float
 // accuracy, CG with it reaches a tight tolerance, and a simplicial factor falls back to CHOLMOD.
 TEST(SparseSystem, FloatPreconditionerMatchesTheDoubleSolve) {

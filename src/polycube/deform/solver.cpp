@@ -294,12 +294,12 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   for (const EdgeConstraint& e : opt.edges)
     POLYCUBE_ASSERT(e.pair >= 0 && e.pair < static_cast<int>(p.pairs.size()), "edge constraint out of range");
 
-  // Sparsity: tets and the 4 vertices of each adjacent boundary pair.
+  // Sparsity: tets, boundary triangles (faces of tets in volume mode: listed for the cache of
+  // value positions) and the 4 vertices of each adjacent boundary pair.
   std::vector<std::vector<int>> elements;
-  elements.reserve(T.rows() + p.pairs.size());
+  elements.reserve(T.rows() + B.rows() + p.pairs.size() + p.thickness.size());
   for (int t = 0; t < T.rows(); ++t) elements.push_back({T(t, 0), T(t, 1), T(t, 2), T(t, 3)});
-  if (p.surface)
-    for (int f = 0; f < B.rows(); ++f) elements.push_back({B(f, 0), B(f, 1), B(f, 2)});
+  for (int f = 0; f < B.rows(); ++f) elements.push_back({B(f, 0), B(f, 1), B(f, 2)});
   for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
   for (const ThicknessPair& tp : p.thickness) elements.push_back({tp.v, B(tp.f, 0), B(tp.f, 1), B(tp.f, 2)});
   SparseSystem sys(static_cast<int>(X.rows()), elements);
@@ -311,6 +311,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   std::vector<double> side_values(arap_values.size(), 0.0);  // the volume terms' Hessian (see evaluate)
   SparseSystem::Buffer side(sys, side_values);
   const double arap_diag = sys.mean_diagonal();
+  std::vector<double> assembled;  // the merit energy's Hessian approximation, before the damping
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0, cg_failures = 0, cg_failed_iterations = 0;
@@ -370,12 +371,13 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       const Energies e0 =
           evaluate(p, X, alpha, eps, &g, &sys, false, &side, opt.lagrangian_hessian ? lambda_prev : 0.0);
       {
+        // The volume terms added, and the sum kept (the damping below changes the diagonal).
         std::vector<double>& v = sys.values();
-        for (size_t k = 0; k < v.size(); ++k) v[k] += side_values[k];
+        assembled.resize(v.size());
+        for (size_t k = 0; k < v.size(); ++k) assembled[k] = v[k] += side_values[k];
       }
       Eigen::VectorXd gc = Eigen::VectorXd::Zero(X.size());
       const double C = area_constraint(X, B, p.area0, &gc);
-      const std::vector<double> assembled = sys.values();
       t_asm += sw_asm.seconds();
       Stopwatch sw_fac;
       // The Hessian changes slowly within a schedule step: reuse the last factorization as a
@@ -396,8 +398,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
           last_cg > opt.cg_refactor_fraction * limit && last_cg > prev_cg)
         factor_valid = false;
       if (factor_valid) {
-        sys.values() = assembled;
-        sys.add_diagonal(mu);
+        sys.add_diagonal(mu);  // (the values are still the assembled ones)
         const double tolerance =
             opt.cg_tolerance_late > 0 && step >= opt.cg_late_from_step ? opt.cg_tolerance_late : opt.cg_tolerance;
         const auto [i1, i2] = sys.solve_pcg_pair(g, Hg, gc, Hc, tolerance, limit);

@@ -59,49 +59,59 @@ int SparseSystem::position(int vi, int vj, int a, int b) const {
 }
 
 void SparseSystem::cache_elements(const std::vector<std::vector<int>>& elements) {
-  cache_keys_.clear();
-  cache_pos_.clear();
-  cache_order_.clear();
+  for (ElementCache& c : cache_) c = ElementCache();
   for (const auto& e : elements) {
-    if (e.size() != 4) continue;
-    std::array<int, 4> k{e[0], e[1], e[2], e[3]};
-    cache_keys_.push_back({k, static_cast<int>(cache_pos_.size())});
-    cache_order_.push_back(k);
-    for (int p = 0; p < 4; ++p)
-      for (int q = 0; q < 4; ++q)
-        for (int b = 0; b < 3; ++b)
-          cache_pos_.push_back(k[p] <= k[q] ? position(k[p], k[q], 0, b) : -1);
+    const int nv = static_cast<int>(e.size());
+    if (nv != 3 && nv != 4) continue;
+    ElementCache& c = cache_[nv - 3];
+    const std::array<int, 4> k{e[0], e[1], e[2], nv == 4 ? e[3] : -1};
+    c.keys.push_back({k, static_cast<int>(c.order.size())});
+    c.order.push_back(k);
+    for (int p = 0; p < nv; ++p)
+      for (int q = 0; q < nv; ++q)
+        for (int b = 0; b < 3; ++b) c.pos.push_back(k[p] <= k[q] ? position(k[p], k[q], 0, b) : -1);
   }
-  std::sort(cache_keys_.begin(), cache_keys_.end());
+  for (ElementCache& c : cache_) std::sort(c.keys.begin(), c.keys.end());
 }
 
 void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) {
   add_to(values_, cursor_, v, nv, H);
 }
 
-void SparseSystem::add_to(std::vector<double>& vals, int& cursor, const int* v, int nv,
+void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
                           const Eigen::Ref<const Eigen::MatrixXd>& H) const {
-  if (nv == 4 && !cache_keys_.empty()) {
-    const std::array<int, 4> k{v[0], v[1], v[2], v[3]};
+  if ((nv == 3 || nv == 4) && !cache_[nv - 3].order.empty()) {
+    const ElementCache& c = cache_[nv - 3];
+    int& cursor = cursors[nv - 3];
+    const std::array<int, 4> k{v[0], v[1], v[2], nv == 4 ? v[3] : -1};
     // The energies add their elements in the order given to cache_elements: try the element after
     // the last one first, and search the sorted keys only when that is not it (fandisk, 37.8k
     // tets: a binary search over 57k keys per element was a third of the assembly).
-    constexpr int kStride = 4 * 4 * 3;
-    int offset = -1;
-    if (cursor >= 0 && cursor < static_cast<int>(cache_order_.size()) && cache_order_[cursor] == k) {
-      offset = cursor * kStride;
+    const int stride = nv * nv * 3;
+    const int count = static_cast<int>(c.order.size());
+    int e = -1;
+    if (cursor >= 0 && cursor < count && c.order[cursor] == k) {
+      e = cursor;
     } else {
-      auto it = std::lower_bound(cache_keys_.begin(), cache_keys_.end(), std::make_pair(k, -1));
-      if (it != cache_keys_.end() && it->first == k) offset = it->second;
+      auto it = std::lower_bound(c.keys.begin(), c.keys.end(), std::make_pair(k, -1));
+      if (it != c.keys.end() && it->first == k) e = it->second;
     }
-    if (offset >= 0) {
-      cursor = offset / kStride + 1;
-      const int* pos = &cache_pos_[offset];
-      for (int p = 0; p < 4; ++p)
-        for (int q = 0; q < 4; ++q) {
+    if (e >= 0) {
+      cursor = e + 1;
+      // The values an element adds to are scattered over the array (cache misses: most of the
+      // assembly's time): fetch the next element's while this one is added (rocker, 132k tets:
+      // the volume barrier's assembly 89 -> 62 ms). The arithmetic is unchanged.
+      if (cursor < count) {
+        const int* next = &c.pos[static_cast<size_t>(cursor) * stride];
+        for (int i = 0; i < stride; ++i)
+          if (next[i] >= 0) __builtin_prefetch(&vals[next[i]], 1, 1);
+      }
+      const int* pos = &c.pos[static_cast<size_t>(e) * stride];
+      for (int p = 0; p < nv; ++p)
+        for (int q = 0; q < nv; ++q) {
           if (v[p] > v[q] || (v[p] == v[q] && p != q)) continue;
           for (int b = 0; b < 3; ++b) {
-            const int base = pos[(4 * p + q) * 3 + b];
+            const int base = pos[(nv * p + q) * 3 + b];
             const int amax = v[p] == v[q] ? b : 2;
             for (int a = 0; a <= amax; ++a) vals[base + a] += H(3 * p + a, 3 * q + b);
           }

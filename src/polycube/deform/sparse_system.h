@@ -46,10 +46,11 @@ class SparseSystem : public HessianSink {
    private:
     const SparseSystem& sys_;
     std::vector<double>& values_;
-    int cursor_ = 0;  // see add_to
+    std::array<int, 2> cursor_{};  // see add_to
   };
-  /// Precomputes the value positions of the 4-vertex elements given to the constructor (tets
-  /// first), so that add() of those elements skips the index search.
+  /// Precomputes the value positions of the 3- and 4-vertex elements given (their vertices must
+  /// be in the pattern), so that add() of those elements skips the index search. Energies add
+  /// their elements in the order given here (tets, boundary triangles, boundary pairs).
   void cache_elements(const std::vector<std::vector<int>>& elements);
   /// Adds mu to every diagonal entry.
   void add_diagonal(double mu);
@@ -95,19 +96,26 @@ class SparseSystem : public HessianSink {
 
  private:
   int position(int vi, int vj, int a, int b) const;  // vi <= vj
-  // Adds H into `values`; `cursor` is the sink's guess of the next cached element (see add_to).
-  void add_to(std::vector<double>& values, int& cursor, const int* v, int nv,
+  // Adds H into `values`; `cursor` holds the sink's guesses of the next cached element of each
+  // size (see add_to).
+  void add_to(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv,
               const Eigen::Ref<const Eigen::MatrixXd>& H) const;
   int n_;
   std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
   std::vector<double> values_;
   std::vector<int> diag_;
-  // Cache: for a sorted 4-vertex key, offset into cache_pos_ of its 4x4x3 column-start positions.
-  std::vector<std::pair<std::array<int, 4>, int>> cache_keys_;
-  std::vector<int> cache_pos_;
-  std::vector<std::array<int, 4>> cache_order_;  // the cached keys in the order given
-  int cursor_ = 0;                                // add()'s guess of the next cached element
+  // Caches of the elements of 3 (index 0) and 4 (index 1) vertices: per element in the order
+  // given, its nv x nv x 3 column-start positions (-1 below the diagonal); the keys (the vertex
+  // lists, a triangle's with -1 last) sorted with their element's index, for elements added out
+  // of order.
+  struct ElementCache {
+    std::vector<std::pair<std::array<int, 4>, int>> keys;
+    std::vector<int> pos;
+    std::vector<std::array<int, 4>> order;
+  };
+  std::array<ElementCache, 2> cache_;
+  std::array<int, 2> cursor_{};  // add()'s guesses of the next cached element
   std::unique_ptr<CholmodLLT> llt_;
   // Per slot: CHOLMOD's common (workspace, status) and the solve's reused result and workspaces.
   struct Slot {
