@@ -325,7 +325,7 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
 
 // The cached value positions (tets, boundary triangles and boundary pairs, with the next
 // element's values fetched ahead) add exactly what the index search adds, in the order given
-// and out of it.
+// and out of it; a rank-1 Hessian added without forming it, exactly what the formed one adds.
 TEST(SparseSystem, CachedAssemblyMatchesTheIndexSearchBitForBit) {
   const auto s = sphere(2);
   const TetMesh tm = tet_mesh_of(s.V, s.F, 3000);
@@ -357,6 +357,29 @@ TEST(SparseSystem, CachedAssemblyMatchesTheIndexSearchBitForBit) {
   EXPECT_TRUE(searched.values() == cached.values());
   EXPECT_TRUE(side == side_searched);
   EXPECT_GT(*std::max_element(side.begin(), side.end()), 0.0);
+
+  // A rank-1 element Hessian added without forming it (add_outer) rounds as Eigen's outer product.
+  deform::SparseSystem outer(n, elements), formed(n, elements);
+  outer.cache_elements(elements);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (int t = 0; t < tm.T.rows(); t += 7) {
+    const int v[4] = {tm.T(t, 0), tm.T(t, 1), tm.T(t, 2), tm.T(t, 3)};
+    Eigen::Matrix<double, 12, 1> u;
+    for (int i = 0; i < 12; ++i) u[i] = U(rng);
+    const double c = 0.1 * U(rng) / 3.0;
+    outer.add_outer(v, 4, c, u.data());
+    formed.add(v, 4, Eigen::Matrix<double, 12, 12>(c * u * u.transpose()));
+  }
+  for (int f = 0; f < F.rows(); f += 5) {
+    const int v[3] = {F(f, 0), F(f, 1), F(f, 2)};
+    Eigen::Matrix<double, 9, 1> u;
+    for (int i = 0; i < 9; ++i) u[i] = U(rng);
+    const double c = U(rng) / 7.0;
+    outer.add_outer(v, 3, c, u.data());
+    formed.add(v, 3, Eigen::Matrix<double, 9, 9>(c * u * u.transpose()));
+  }
+  EXPECT_TRUE(outer.values() == formed.values());
 }
 
 // The preconditioner's single-precision copy of a supernodal factor solves the system to float

@@ -458,7 +458,7 @@ double volume_barrier_energy(const MatX3d& X, const MatX4i& T, const ArapRest& r
       const double dphi = neutral ? weight * wt * (1.0 - 1.0 / J) : -weight * wt / J;
       scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(dphi * dJ));
     }
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
+    if (hess) hess->add_outer(v, 4, weight * wt / (J * J), dJ.data());
   }
   return weight * E;
 }
@@ -480,7 +480,7 @@ double crush_guard_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest
     const Eigen::Matrix<double, 12, 1> dJ = tv.gradient();
     // d psi / dJ = 1/j0 - 1/J; d2 psi / dJ2 = 1/J^2.
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * wt * (1.0 / j0 - 1.0 / J) * dJ));
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * wt / (J * J) * dJ * dJ.transpose()));
+    if (hess) hess->add_outer(v, 4, weight * wt / (J * J), dJ.data());
   }
   return weight * E;
 }
@@ -499,7 +499,7 @@ double area_barrier_energy(const MatX3d& X, const MatX3i& F, const SurfaceArapRe
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 9, 1> dA = normal_jacobian(xa, xb, xc).transpose() * (N / A);
     if (grad) scatter_grad<9>(*grad, v, Eigen::Matrix<double, 9, 1>(-weight * rest.w[f] / A * dA));
-    if (hess) hess->add(v, 3, Eigen::Matrix<double, 9, 9>(weight * rest.w[f] / (A * A) * dA * dA.transpose()));
+    if (hess) hess->add_outer(v, 3, weight * rest.w[f] / (A * A), dA.data());
   }
   return weight * E;
 }
@@ -590,7 +590,7 @@ double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<Thic
     dr.segment<3>(0) = u;
     for (int i = 0; i < 3; ++i) dr.segment<3>(3 + 3 * i) = -p.bary[i] * u;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(weight * p.w * (1 - 1 / r) * dr));
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * p.w / (r * r) * dr * dr.transpose()));
+    if (hess) hess->add_outer(v, 4, weight * p.w / (r * r), dr.data());
   }
   return weight * E;
 }
@@ -739,7 +739,7 @@ double barrier_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePa
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 1, 12> dD = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(-weight / D * dD.transpose()));
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight / (D * D) * dD.transpose() * dD));
+    if (hess) hess->add_outer(v, 4, weight / (D * D), dD.data());
   }
   return weight * E;
 }
@@ -786,7 +786,7 @@ double edge_energy(const MatX3d& X, const MatX3i& F, const std::vector<FacePair>
     if (!grad && !hess) continue;
     const Eigen::Matrix<double, 1, 12> dr = pn.ng.transpose() * pn.Jf + pn.nf.transpose() * pn.Jg;
     if (grad) scatter_grad<12>(*grad, v, Eigen::Matrix<double, 12, 1>(2 * weight * e.omega * r * dr.transpose()));
-    if (hess) hess->add(v, 4, Eigen::Matrix<double, 12, 12>(2 * weight * e.omega * dr.transpose() * dr));
+    if (hess) hess->add_outer(v, 4, 2 * weight * e.omega, dr.data());
   }
   return weight * E;
 }

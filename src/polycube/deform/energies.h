@@ -20,6 +20,17 @@ class HessianSink {
  public:
   virtual ~HessianSink() = default;
   virtual void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) = 0;
+  /// Adds the rank-1 element Hessian (c u) u^T, u of size 3 nv (at most 12): entry (i, j) is
+  /// (c u_i) u_j, as Eigen's outer product `c * u * u.transpose()` rounds it. Sinks may add it
+  /// without forming the matrix.
+  virtual void add_outer(const int* v, int nv, double c, const double* u) {
+    Eigen::Matrix<double, 12, 1> w;
+    for (int i = 0; i < 3 * nv; ++i) w[i] = c * u[i];
+    Eigen::Matrix<double, 12, 12> H;
+    for (int j = 0; j < 3 * nv; ++j)
+      for (int i = 0; i < 3 * nv; ++i) H(i, j) = w[i] * u[j];
+    add(v, nv, H.topLeftCorner(3 * nv, 3 * nv));
+  }
 };
 
 /// Dense sink for tests and small problems.

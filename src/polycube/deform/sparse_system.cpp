@@ -78,8 +78,9 @@ void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::Matri
   add_to(values_, cursor_, v, nv, H);
 }
 
-void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
-                          const Eigen::Ref<const Eigen::MatrixXd>& H) const {
+template <class Entry>
+void SparseSystem::add_element(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
+                               const Entry& entry) const {
   if ((nv == 3 || nv == 4) && !cache_[nv - 3].order.empty()) {
     const ElementCache& c = cache_[nv - 3];
     int& cursor = cursors[nv - 3];
@@ -113,7 +114,7 @@ void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors
           for (int b = 0; b < 3; ++b) {
             const int base = pos[(nv * p + q) * 3 + b];
             const int amax = v[p] == v[q] ? b : 2;
-            for (int a = 0; a <= amax; ++a) vals[base + a] += H(3 * p + a, 3 * q + b);
+            for (int a = 0; a <= amax; ++a) vals[base + a] += entry(3 * p + a, 3 * q + b);
           }
         }
       return;
@@ -130,9 +131,26 @@ void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors
       for (int b = 0; b < 3; ++b) {
         int pos = position(vi, vj, 0, b);
         const int amax = vi == vj ? b : 2;
-        for (int a = 0; a <= amax; ++a) vals[pos + a] += H(3 * p + a, 3 * q + b);
+        for (int a = 0; a <= amax; ++a) vals[pos + a] += entry(3 * p + a, 3 * q + b);
       }
     }
+}
+
+void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
+                          const Eigen::Ref<const Eigen::MatrixXd>& H) const {
+  add_element(vals, cursors, v, nv, [&H](int i, int j) { return H(i, j); });
+}
+
+void SparseSystem::add_outer_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
+                                double c, const double* u) const {
+  POLYCUBE_ASSERT(nv <= 4, "rank-1 element Hessians have at most 4 vertices");
+  double w[12];
+  for (int i = 0; i < 3 * nv; ++i) w[i] = c * u[i];
+  add_element(vals, cursors, v, nv, [&w, u](int i, int j) { return w[i] * u[j]; });
+}
+
+void SparseSystem::add_outer(const int* v, int nv, double c, const double* u) {
+  add_outer_to(values_, cursor_, v, nv, c, u);
 }
 
 void SparseSystem::add_diagonal(double mu) {

@@ -34,6 +34,7 @@ class SparseSystem : public HessianSink {
   /// Current values (upper triangle, CSC order); copy/restore for a constant part.
   std::vector<double>& values() { return values_; }
   void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override;
+  void add_outer(const int* v, int nv, double c, const double* u) override;
   /// A sink with this system's pattern that adds into `values` (sized like values()) instead, so
   /// that two threads can assemble terms side by side and the caller sums the arrays after.
   class Buffer : public HessianSink {
@@ -41,6 +42,9 @@ class SparseSystem : public HessianSink {
     Buffer(const SparseSystem& sys, std::vector<double>& values) : sys_(sys), values_(values) {}
     void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override {
       sys_.add_to(values_, cursor_, v, nv, H);
+    }
+    void add_outer(const int* v, int nv, double c, const double* u) override {
+      sys_.add_outer_to(values_, cursor_, v, nv, c, u);
     }
 
    private:
@@ -100,6 +104,13 @@ class SparseSystem : public HessianSink {
   // size (see add_to).
   void add_to(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv,
               const Eigen::Ref<const Eigen::MatrixXd>& H) const;
+  // The same for the rank-1 Hessian (c u) u^T (see HessianSink::add_outer).
+  void add_outer_to(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv, double c,
+                    const double* u) const;
+  // Adds element entry (i, j) = entry(i, j) at the cached or searched positions (see add_to).
+  template <class Entry>
+  void add_element(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv,
+                   const Entry& entry) const;
   int n_;
   std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
