@@ -904,6 +904,21 @@ TEST(Cli, TheBoundaryIsFittedAgainAfterTheHexUntangling) {
   EXPECT_GT(h["sj_min"].get<double>(), 0.0);
 }
 
+TEST(Cli, TheRealizationToleranceStopsItsArapIterationsSooner) {
+  // box_hole: 15 ARAP iterations at the default 1e-6; a loose tolerance stops them after a few,
+  // still an exact polycube, at a slightly higher ARAP distortion.
+  const std::string dir = temp_dir("realize_tolerance");
+  ASSERT_EQ(run_cli("--example box_hole --until polycube -q -o " + dir + "/a").code, 0);
+  ASSERT_EQ(run_cli("--example box_hole --until polycube -q --realize-tolerance 0.05 -o " + dir + "/b").code, 0);
+  const json a = report(dir + "/a")["polycube"], b = report(dir + "/b")["polycube"];
+  EXPECT_EQ(b["realize_options"]["volume_tolerance"].get<double>(), 0.05);
+  EXPECT_TRUE(b["realization"]["success"].get<bool>());
+  EXPECT_EQ(b["inverted_tets"].get<int>(), 0);
+  EXPECT_LT(b["realization"]["arap_iterations"].get<int>(), a["realization"]["arap_iterations"].get<int>());
+  EXPECT_GE(b["arap_distortion"].get<double>(), a["arap_distortion"].get<double>());
+  EXPECT_LT(b["arap_distortion"].get<double>(), 1.05 * a["arap_distortion"].get<double>());
+}
+
 TEST(Cli, HexMeshFromAGivenPolycubeMap) {
   std::string dir = temp_dir("given_map");
   ASSERT_EQ(run_cli("--example box_hole -q -o " + dir + "/a").code, 0);

@@ -621,7 +621,7 @@ class Realizer {
       E = Et;
       // Short steps mean nearly flat tets: take the next one with the barrier's curvature.
       coupled = s < 0.25;
-      if (decrease <= opt_.tolerance * E + 1e-15 && s >= 0.25) {  // absolute floor: E ~ 0 for a polycube input
+      if (decrease <= opt_.volume_tolerance * E + 1e-15 && s >= 0.25) {  // absolute floor: E ~ 0 for a polycube input
         ++it;
         break;
       }
