@@ -704,23 +704,17 @@ PairNormals pair_normals(const MatX3d& X, const MatX3i& F, const FacePair& p, bo
   PairNormals r;
   const UnitNormal nf = unit_normal(X, F(p.f, 0), F(p.f, 1), F(p.f, 2), derivatives);
   const UnitNormal ng = unit_normal(X, p.b, p.a, p.d, derivatives);
-  if (!derivatives) {
-    r.nf = nf.n;
-    r.ng = ng.n;
-    r.af = nf.area;
-    r.ag = ng.area;
-    return r;
-  }
+  r.nf = nf.n;
+  r.ng = ng.n;
+  r.af = nf.area;
+  r.ag = ng.area;
+  if (!derivatives) return r;
   Eigen::Matrix<double, 3, 9> dnf;
   for (int k = 0; k < 3; ++k) {
     int id = F(p.f, k);
     int slot = id == p.a ? 0 : id == p.b ? 1 : 2;
     dnf.block<3, 3>(0, 3 * slot) = nf.dn.block<3, 3>(0, 3 * k);
   }
-  r.nf = nf.n;
-  r.ng = ng.n;
-  r.af = nf.area;
-  r.ag = ng.area;
   r.Jf = pair_jac_f(dnf);
   r.Jg = pair_jac_g(ng.dn);
   return r;

@@ -9,6 +9,7 @@
 #include <array>
 #include <vector>
 
+#include "polycube/core/error.h"
 #include "polycube/core/types.h"
 
 namespace polycube::deform {
@@ -24,6 +25,7 @@ class HessianSink {
   /// (c u_i) u_j, as Eigen's outer product `c * u * u.transpose()` rounds it. Sinks may add it
   /// without forming the matrix.
   virtual void add_outer(const int* v, int nv, double c, const double* u) {
+    POLYCUBE_ASSERT(nv <= 4, "rank-1 element Hessians have at most 4 vertices");
     Eigen::Matrix<double, 12, 1> w;
     for (int i = 0; i < 3 * nv; ++i) w[i] = c * u[i];
     Eigen::Matrix<double, 12, 12> H;
