@@ -614,8 +614,10 @@ TEST(Realize, Eq17StartPastItsBudgetDoesNotCompeteWithASuccessfulContinuation) {
   const auto [tm4, any] = box_hole_realized("auto", -1, -1);
   EXPECT_EQ(any.realized.start, "eq17");
   // Side by side, the BLAS keeps one thread throughout (set_blas_threads), alone it has two: the
-  // factorizations round differently (1.2e-9 relative on an AVX2 machine).
-  EXPECT_NEAR(any.realized.arap, eq.realized.arap, 1e-8 * eq.realized.arap);
+  // factorizations round differently (1.2e-9 relative on an AVX2 machine with the ARAP iterations'
+  // tolerance at 1e-6), and the iterations may then stop one step apart, a step that lowers the
+  // energy by less than the tolerance (1.7e-7 apart with 1e-5).
+  EXPECT_NEAR(any.realized.arap, eq.realized.arap, chart::RealizeOptions{}.volume_tolerance * eq.realized.arap);
 }
 
 TEST(Chart, CollapsedTrianglesTakeTheirNeighboursLabel) {
