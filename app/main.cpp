@@ -238,6 +238,11 @@ int main(int argc, char** argv) {
                  "less than this, relatively (1e-6, the earlier default: rocker's extraction 90 s against 71 s, the same "
                  "polycube to 1e-5)")
       ->capture_default_str()->check(CLI::PositiveNumber);
+  app.add_option("--realize-folded-tolerance", rz.folded_tolerance,
+                 "Polycube realization (volume): the same, for a start that lands on the planes with boundary "
+                 "triangles facing away from their chart (it fails whatever its ARAP iterations do; its state starts "
+                 "the retries)")
+      ->capture_default_str()->check(CLI::PositiveNumber);
   app.add_option("--eq17-budget", rz.eq17_budget,
                  "Polycube realization, --realize-start auto: elliptic untangling iterations within which the eq17 "
                  "start competes with a successful continuation start (beyond: abandoned once the continuation "

@@ -590,7 +590,8 @@ class Realizer {
     return d;
   }
 
-  int minimize(MatX3d& X, Mode mode, int max_iterations) const {
+  int minimize(MatX3d& X, Mode mode, int max_iterations, double tolerance = -1) const {
+    if (tolerance < 0) tolerance = opt_.volume_tolerance;
     Eigen::VectorXd g, gt;
     double E = energy(X, &g, true);
     int it = 0;
@@ -621,7 +622,7 @@ class Realizer {
       E = Et;
       // Short steps mean nearly flat tets: take the next one with the barrier's curvature.
       coupled = s < 0.25;
-      if (decrease <= opt_.volume_tolerance * E + 1e-15 && s >= 0.25) {  // absolute floor: E ~ 0 for a polycube input
+      if (decrease <= tolerance * E + 1e-15 && s >= 0.25) {  // absolute floor: E ~ 0 for a polycube input
         ++it;
         break;
       }
@@ -1604,9 +1605,19 @@ RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const 
       }
     }
     solver.open_flat(X);
-    a.it = solver.minimize(X, Mode::Reduced, opt.max_iterations);
-    a.arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
+    // A boundary triangle that faces away from its label on the planes stays so: it is a face of
+    // one tet, whose volume is its signed area times the height of the fourth vertex over its
+    // plane, and the ARAP iterations keep its three vertices on that plane and every tet
+    // positive, so the area cannot pass through zero. The attempt then fails whatever they do, and
+    // they only prepare the retries' start: to RealizeOptions::folded_tolerance (see there).
     a.flipped = misoriented(X);
+    if (a.flipped > 0)
+      log.debug("realization from the " + name + " start: " + std::to_string(a.flipped) +
+                " boundary triangles face away from their chart's direction on the planes; ARAP iterations to " +
+                std::to_string(opt.folded_tolerance));
+    a.it = solver.minimize(X, Mode::Reduced, opt.max_iterations, a.flipped > 0 ? opt.folded_tolerance : -1);
+    a.flipped = misoriented(X);
+    a.arap = deform::arap_energy(X, T, solver.arap_rest(), 1.0, nullptr, nullptr);
     a.ut = ut;
     log.debug("realization from the " + name + " start: ARAP " + std::to_string(a.arap) + " after " +
               std::to_string(ut) + " untangling/continuation steps and " + std::to_string(a.it) +

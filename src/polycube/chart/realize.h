@@ -90,6 +90,18 @@ struct RealizeOptions {
   /// charts, corners and edge collapses with 1e-5 as with 1e-6 (the earlier default), ARAP equal
   /// to 1e-5 relative, in 0-5 fewer iterations (forty-seventh session).
   double volume_tolerance = 1e-5;
+  /// Volume mode: volume_tolerance for the ARAP iterations of a start whose landing on the planes
+  /// left boundary triangles facing away from their chart's direction. The iterations cannot turn
+  /// such a triangle back (each is the face of a tet kept positive; see realize.cpp), so that start
+  /// fails whatever they do and its state only becomes the start of the retries (edge collapses,
+  /// relabelling). Measured with 1e-5 (the volume_tolerance) -> 1e-3, from the saved deformations
+  /// (forty-seventh session): rocker 132k tets 135 -> 106 s (the folded starts 37 and 45 -> 21
+  /// and 8 iterations, the same 24 edge collapses, ARAP 0.073095 -> 0.073099); fandisk 35.6k
+  /// 19.7-24.9 -> 14.0-17.2 s (7 -> 8 collapses, 0.03975 -> 0.03968); at `--tets 20000` rocker
+  /// 58.6 -> 47.8 s, fandisk 48.6 -> 13.8 s (8 -> 3 collapses, 0.04439 -> 0.04459). Skipping the
+  /// iterations altogether (rocker 108 s) made fandisk's retries take longer paths (48.6 -> 95.8
+  /// s at 20000): their start is better relaxed.
+  double folded_tolerance = 1e-3;
   int untangle_iterations = 20;   ///< eq17 start: local/global steps at most to remove inverted tets (its wins on the shared meshes needed <= 3)
   /// "auto": the eq17 start's elliptic untangling (L-BFGS iterations, free heights) within which
   /// its result may compete with a successful continuation start. Beyond it (or once it needs the

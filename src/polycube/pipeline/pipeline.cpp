@@ -859,6 +859,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                  {"continuation_retries", opt.polycube.realize.continuation_retries},
                                  {"stall_repeats", opt.polycube.realize.stall_repeats},
                                  {"volume_tolerance", opt.polycube.realize.volume_tolerance},
+                                 {"folded_tolerance", opt.polycube.realize.folded_tolerance},
                                  {"penalty_path", opt.polycube.realize.penalty_path}};
         if (!mapped.terms.empty() && report["constraints"].contains("per_constraint")) {
           // In the polycube: a sharp edge is satisfied when its triangles lie on charts of different
