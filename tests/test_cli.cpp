@@ -292,10 +292,11 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   std::string out = temp_dir("realize_options");
   RunResult r = run_cli(
       "--example box_hole --until polycube --untangle-patience 3 --continuation-retries 1 --stall-repeats 5 "
-      "--pinch-above 0.02 --max-pinches 3 -q -o " +
+      "--pinch-above 0.02 --max-pinches 3 --realize-folded-tolerance 2e-4 -q -o " +
       out);
   ASSERT_EQ(r.code, 0) << r.output;
   json j = report(out);
+  EXPECT_EQ(j["polycube"]["realize_options"]["folded_tolerance"].get<double>(), 2e-4);
   EXPECT_EQ(j["polycube"]["realize_options"]["untangle_patience"].get<int>(), 3);
   EXPECT_EQ(j["polycube"]["realize_options"]["continuation_retries"].get<int>(), 1);
   EXPECT_EQ(j["polycube"]["realize_options"]["stall_repeats"].get<int>(), 5);
@@ -316,6 +317,7 @@ TEST(Cli, RealizationOptionsReachTheReport) {
   EXPECT_EQ(run_cli("--example box_hole --until polycube --untangle-patience 0 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --continuation-retries 7 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --stall-repeats -1 -q -o " + out).code, 2);
+  EXPECT_EQ(run_cli("--example box_hole --until polycube --realize-folded-tolerance 0 -q -o " + out).code, 2);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --pinch-above 2 -q -o " + out).code, 2);
   // Surface mode's relaxation: reported, and the map's worst isometric distortion no higher.
   r = run_cli("--example box_hole --surface --until polycube -q -o " + out);
