@@ -88,7 +88,7 @@ struct RealizeOptions {
   /// collapses; fandisk 10.9 against 15.0 s (0.03968 against 0.03975); the rod and the bumpy torus
   /// the same polycube ARAP. At `--tets 20000` every basic/ and cad/ mesh (22) gives the same
   /// charts, corners and edge collapses with 1e-5 as with 1e-6 (the earlier default), ARAP equal
-  /// to 1e-5 relative, in 0-5 fewer iterations (forty-seventh session).
+  /// to 1e-5 relative, in 0-11 fewer iterations (forty-seventh session).
   double volume_tolerance = 1e-5;
   /// Volume mode: volume_tolerance for the ARAP iterations of a start whose landing on the planes
   /// left boundary triangles facing away from their chart's direction. The iterations cannot turn
