@@ -22,6 +22,7 @@
 #include "polycube/core/lbfgs.h"
 #include "polycube/core/parallel.h"
 #include "polycube/core/topology.h"
+#include "polycube/core/memory.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/untangle.h"
 #include "polycube/tetra/tetrahedralize.h"
@@ -65,6 +66,7 @@ class Cholmod : public Eigen::CholmodDecomposition<SpMat, Eigen::Lower> {
 
 
 std::unique_ptr<Cholmod> make_solver() {
+  use_huge_pages_in_cholmod();  // (the factors fault in huge pages, see core/memory.h)
   auto s = std::make_unique<Cholmod>();
   s->cholmod().print = 0;
   s->setMode(Eigen::CholmodSupernodalLLt);
