@@ -2,12 +2,14 @@
 //
 // The SQP solver's big arrays (CHOLMOD's factor, 424 MB on rocker's 132k tets; its float copy,
 // 212 MB; the system's values, 21 MB, which the assembly adds into at scattered positions) are
-// touched page by page when first written, and on a virtual machine each 4 KB page fault costs
-// about 20 microseconds: rocker's first factorization took 4.3 s against 1.8 s for the later
-// ones, and its float copy 1.2 s against 0.05-0.1 s. With the kernel's transparent huge pages in
-// "madvise" mode (Debian's default), a region marked MADV_HUGEPAGE before it is touched faults in
-// 2 MB pages, and sweeps over it miss the TLB less. Only a hint: without huge pages (another
-// kernel setting, another OS) nothing changes, and the contents and arithmetic are the same.
+// touched page by page when first written, and on a virtual machine 4 KB page faults cost several
+// microseconds each: rocker's first factorization took 4.3 s against 1.8 s for the later ones,
+// its float copy 1.2 s against 0.05-0.1 s, and its polycube extraction, which factorizes afresh
+// at each coupled Newton step, made 2.1M faults. With the kernel's transparent huge pages in
+// "madvise" mode (as on this project's Debian machines) or "always", a region marked
+// MADV_HUGEPAGE before it is touched faults in 2 MB pages (the extraction: 0.1M faults, 82-100 s
+// -> 68-69 s). Only a hint: without huge pages (another kernel setting, another OS) nothing
+// changes, and the contents and arithmetic are the same.
 #pragma once
 #include <cstddef>
 #include <new>
