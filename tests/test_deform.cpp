@@ -343,7 +343,7 @@ TEST(SparseSystem, CachedAssemblyMatchesTheIndexSearchBitForBit) {
   for (int v = 0; v < n; ++v) X(v, 0) *= 1.0 + 0.2 * X(v, 1) * X(v, 1);
   const MatX3i Frev = F.colwise().reverse();
   const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
-  deform::SparseSystem::Values side(cached.values().size(), 0.0), side_searched(side.size(), 0.0);
+  std::vector<double> side(cached.values().size(), 0.0), side_searched(side.size(), 0.0);
   deform::SparseSystem::Buffer buffer(cached, side), buffer_searched(searched, side_searched);
   for (deform::SparseSystem* sys : {&searched, &cached}) {
     deform::arap_energy(X, tm.T, rest, 1.0, nullptr, sys);

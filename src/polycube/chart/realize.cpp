@@ -66,7 +66,6 @@ class Cholmod : public Eigen::CholmodDecomposition<SpMat, Eigen::Lower> {
 
 
 std::unique_ptr<Cholmod> make_solver() {
-  use_huge_pages_in_cholmod();  // (the factors fault in huge pages, see core/memory.h)
   auto s = std::make_unique<Cholmod>();
   s->cholmod().print = 0;
   s->setMode(Eigen::CholmodSupernodalLLt);
@@ -1262,6 +1261,9 @@ EdgeOrder check_edge_order(const MatX3i& B, const Planes& planes, const MatX3d& 
 RealizeResult realize_polycube(const MatX3d& rest_in, const MatX4i& T_in, const MatX3i& B, const MatX3d& deformed,
                                const std::vector<int>& labels, const RealizeOptions& opt, const Hooks& hooks) {
   if (T_in.rows() == 0) return realize_surface_polycube(rest_in, B, deformed, labels, opt, hooks);
+  // The fresh factor of every coupled Newton step faults in huge pages (rocker: 2.1M page faults
+  // -> 0.1M, see core/memory.h).
+  const CholmodHugePages huge_pages;
   Stopwatch sw;
   RealizeResult r;
   auto fail = [&](const std::string& why) {

@@ -16,13 +16,24 @@ namespace polycube {
 namespace {
 constexpr std::size_t kHugePage = std::size_t(2) << 20;
 
-void* cholmod_calloc(std::size_t n, std::size_t size) {
+void* huge_page_calloc(std::size_t n, std::size_t size) {
   if (size != 0 && n > static_cast<std::size_t>(-1) / size) return nullptr;
   const std::size_t bytes = n * size;
   if (bytes < kHugePageMinBytes) return std::calloc(n, size);
   void* p = huge_page_malloc(bytes);
   if (p) std::memset(p, 0, bytes);
   return p;
+}
+
+struct CholmodState {
+  std::mutex mutex;
+  int users = 0;
+  void* (*malloc_before)(std::size_t) = nullptr;
+  void* (*calloc_before)(std::size_t, std::size_t) = nullptr;
+};
+CholmodState& cholmod_state() {
+  static CholmodState s;
+  return s;
 }
 }  // namespace
 
@@ -47,16 +58,24 @@ void* huge_page_malloc(std::size_t bytes) {
   return p;
 }
 
-void huge_page_free(void* p) noexcept { std::free(p); }
-
-void use_huge_pages_in_cholmod() {
-  static std::once_flag once;
-  std::call_once(once, [] {
+CholmodHugePages::CholmodHugePages() {
+  CholmodState& s = cholmod_state();
+  const std::lock_guard<std::mutex> lock(s.mutex);
+  if (s.users++ == 0) {
+    s.malloc_before = SuiteSparse_config.malloc_func;
+    s.calloc_before = SuiteSparse_config.calloc_func;
     SuiteSparse_config.malloc_func = huge_page_malloc;
-    SuiteSparse_config.calloc_func = cholmod_calloc;
-    // realloc and free stay the C library's: both accept huge_page_malloc's blocks (a block
-    // grown by realloc is simply not marked).
-  });
+    SuiteSparse_config.calloc_func = huge_page_calloc;
+  }
+}
+
+CholmodHugePages::~CholmodHugePages() {
+  CholmodState& s = cholmod_state();
+  const std::lock_guard<std::mutex> lock(s.mutex);
+  if (--s.users == 0) {
+    SuiteSparse_config.malloc_func = s.malloc_before;
+    SuiteSparse_config.calloc_func = s.calloc_before;
+  }
 }
 
 }  // namespace polycube

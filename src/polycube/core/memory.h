@@ -1,23 +1,25 @@
-// Large arrays backed by transparent huge pages (2 MB) where the kernel offers them.
+// Large blocks backed by transparent huge pages (2 MB) where the kernel offers them, for CHOLMOD's
+// factors in the polycube realization.
 //
-// The SQP solver's big arrays (CHOLMOD's factor, 424 MB on rocker's 132k tets; its float copy,
-// 212 MB; the system's values, 21 MB, which the assembly adds into at scattered positions) are
-// touched page by page when first written, and on a virtual machine 4 KB page faults cost several
-// microseconds each: rocker's first factorization took 4.3 s against 1.8 s for the later ones,
-// its float copy 1.2 s against 0.05-0.1 s, and its polycube extraction, which factorizes afresh
-// at each coupled Newton step, made 2.1M faults. With the kernel's transparent huge pages in
-// "madvise" mode (as on this project's Debian machines) or "always", a region marked
-// MADV_HUGEPAGE before it is touched faults in 2 MB pages (the extraction: 0.1M faults, 82-100 s
-// -> 68-69 s). Only a hint: without huge pages (another kernel setting, another OS) nothing
-// changes, and the contents and arithmetic are the same.
+// The realization factorizes afresh at each coupled Newton step (CHOLMOD allocates a new factor,
+// tens to hundreds of MB, and frees it after), and every 4 KB page of a fresh block faults when
+// first written: rocker's extraction (132k tets, from its saved deformation) made 2.1M page faults
+// and spent 37-43 s in the kernel on this virtual machine. With the kernel's transparent huge pages
+// in "madvise" mode (as on this project's Debian machines) or "always", a block marked
+// MADV_HUGEPAGE before it is touched faults in 2 MB pages: 0.1M faults, 22 s in the kernel, the
+// extraction 82-100 s -> 68-69 s, the same polycube to the bit. Only a hint: without huge pages
+// (another kernel setting, another OS) nothing changes, and the contents and arithmetic are the
+// same.
+//
+// Not used for the deformation's SQP solver, which keeps one factor for the whole run: there
+// rocker's page faults fell 404k -> 68k with huge pages, but its assembly and line search measured
+// 1-5 s slower in three of three pairs of runs (the cause not found), so the gain did not show.
 #pragma once
 #include <cstddef>
-#include <new>
-#include <vector>
 
 namespace polycube {
 
-/// Arrays from this many bytes on are marked for huge pages (smaller ones gain nothing).
+/// Blocks from this many bytes on are marked for huge pages (smaller ones gain nothing).
 constexpr std::size_t kHugePageMinBytes = std::size_t(4) << 20;
 
 /// Marks the 2 MB-aligned part of [p, p + bytes) for transparent huge pages (madvise
@@ -25,42 +27,20 @@ constexpr std::size_t kHugePageMinBytes = std::size_t(4) << 20;
 /// Call it before the memory is first written.
 void advise_huge_pages(void* p, std::size_t bytes);
 
-/// malloc / free with advise_huge_pages on large blocks (aligned to 2 MB when large, so that the
-/// whole block can be backed by huge pages).
+/// malloc with advise_huge_pages on large blocks, which are aligned to 2 MB so that the whole block
+/// can be backed by huge pages. Free the result with std::free.
 void* huge_page_malloc(std::size_t bytes);
-void huge_page_free(void* p) noexcept;
 
-/// Allocator for std::vector: large buffers marked for huge pages before they are filled.
-template <class T>
-struct HugePageAllocator {
-  using value_type = T;
-  HugePageAllocator() = default;
-  template <class U>
-  HugePageAllocator(const HugePageAllocator<U>&) noexcept {}
-  T* allocate(std::size_t n) {
-    if (n > static_cast<std::size_t>(-1) / sizeof(T)) throw std::bad_array_new_length();
-    void* p = huge_page_malloc(n * sizeof(T));
-    if (!p) throw std::bad_alloc();
-    return static_cast<T*>(p);
-  }
-  void deallocate(T* p, std::size_t) noexcept { huge_page_free(p); }
-  template <class U>
-  bool operator==(const HugePageAllocator<U>&) const noexcept {
-    return true;
-  }
-  template <class U>
-  bool operator!=(const HugePageAllocator<U>&) const noexcept {
-    return false;
-  }
+/// While an instance exists (in any thread), CHOLMOD allocates its large blocks with
+/// huge_page_malloc (through SuiteSparse_config's allocation functions, which are process-wide);
+/// the functions before the first instance come back when the last one ends. Blocks allocated
+/// either way may be freed either way (both go to std::free).
+class CholmodHugePages {
+ public:
+  CholmodHugePages();
+  ~CholmodHugePages();
+  CholmodHugePages(const CholmodHugePages&) = delete;
+  CholmodHugePages& operator=(const CholmodHugePages&) = delete;
 };
-
-/// A vector whose large buffers are marked for huge pages.
-template <class T>
-using HugeVector = std::vector<T, HugePageAllocator<T>>;
-
-/// Makes CHOLMOD (through SuiteSparse_config's allocation functions, process-wide) allocate with
-/// huge_page_malloc, so that its factors fault in huge pages. Idempotent; call before the first
-/// factorization.
-void use_huge_pages_in_cholmod();
 
 }  // namespace polycube

@@ -12,8 +12,6 @@
 #include <array>
 #include <vector>
 
-#include "polycube/core/memory.h"
-
 namespace polycube::deform {
 
 class FloatFactor {
@@ -41,7 +39,7 @@ class FloatFactor {
   int n_ = 0, nsuper_ = 0, max_rows_ = 0;
   std::vector<int> super_, pi_, s_, perm_;
   std::vector<long> off_;    // per supernode, its first value in x_
-  HugeVector<float> x_;      // per supernode, the rows below its diagonal block, then that block's lower triangle
+  std::vector<float> x_;     // per supernode, the rows below its diagonal block, then that block's lower triangle
   std::vector<float> dinv_;  // inverse diagonal of L
   // Two-thread split of the elimination tree (see partition()): per thread, ranges [begin, end) of
   // supernodes (whole subtrees); the top part's ranges; per column, 0 or 1 (a thread's) or 2 (top).

@@ -307,11 +307,11 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   // The ARAP Hessian G^T G is constant: assemble it once.
   sys.set_zero();
   p.distortion(X, nullptr, &sys);
-  const SparseSystem::Values arap_values = sys.values();
-  SparseSystem::Values side_values(arap_values.size(), 0.0);  // the volume terms' Hessian (see evaluate)
+  const std::vector<double> arap_values = sys.values();
+  std::vector<double> side_values(arap_values.size(), 0.0);  // the volume terms' Hessian (see evaluate)
   SparseSystem::Buffer side(sys, side_values);
   const double arap_diag = sys.mean_diagonal();
-  SparseSystem::Values assembled;  // the merit energy's Hessian approximation, before the damping
+  std::vector<double> assembled;  // the merit energy's Hessian approximation, before the damping
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
   int n_ls = 0, factorizations = 0, cg_iterations = 0, cg_failures = 0, cg_failed_iterations = 0;
@@ -372,7 +372,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
           evaluate(p, X, alpha, eps, &g, &sys, false, &side, opt.lagrangian_hessian ? lambda_prev : 0.0);
       {
         // The volume terms added, and the sum kept (the damping below changes the diagonal).
-        SparseSystem::Values& v = sys.values();
+        std::vector<double>& v = sys.values();
         assembled.resize(v.size());
         for (size_t k = 0; k < v.size(); ++k) assembled[k] = v[k] += side_values[k];
       }

@@ -34,7 +34,6 @@ SparseSystem::SparseSystem(int n, const std::vector<std::vector<int>>& elements)
   std::copy(inner.begin(), inner.end(), A_.innerIndexPtr());
   diag_.resize(3 * n);
   for (int c = 0; c < 3 * n; ++c) diag_[c] = outer[c + 1] - 1;
-  use_huge_pages_in_cholmod();
   for (Slot& s : slots_) {
     cholmod_start(&s.common);
     s.common.print = 0;  // the library never prints
@@ -80,7 +79,7 @@ void SparseSystem::add(const int* v, int nv, const Eigen::Ref<const Eigen::Matri
 }
 
 template <class Entry>
-void SparseSystem::add_element(Values& vals, std::array<int, 2>& cursors, const int* v, int nv,
+void SparseSystem::add_element(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
                                const Entry& entry) const {
   if ((nv == 3 || nv == 4) && !cache_[nv - 3].order.empty()) {
     const ElementCache& c = cache_[nv - 3];
@@ -137,12 +136,12 @@ void SparseSystem::add_element(Values& vals, std::array<int, 2>& cursors, const 
     }
 }
 
-void SparseSystem::add_to(Values& vals, std::array<int, 2>& cursors, const int* v, int nv,
+void SparseSystem::add_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
                           const Eigen::Ref<const Eigen::MatrixXd>& H) const {
   add_element(vals, cursors, v, nv, [&H](int i, int j) { return H(i, j); });
 }
 
-void SparseSystem::add_outer_to(Values& vals, std::array<int, 2>& cursors, const int* v, int nv,
+void SparseSystem::add_outer_to(std::vector<double>& vals, std::array<int, 2>& cursors, const int* v, int nv,
                                 double c, const double* u) const {
   POLYCUBE_ASSERT(nv <= 4, "rank-1 element Hessians have at most 4 vertices");
   double w[12];

@@ -9,7 +9,6 @@
 #include <memory>
 #include <vector>
 
-#include "polycube/core/memory.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/float_factor.h"
 
@@ -23,9 +22,6 @@ class CholmodLLT : public Eigen::CholmodDecomposition<Eigen::SparseMatrix<double
 
 class SparseSystem : public HessianSink {
  public:
-  /// The values of a matrix of this pattern (upper triangle, CSC order). Large ones are backed by
-  /// huge pages (core/memory.h): the assembly adds into them at scattered positions.
-  using Values = HugeVector<double>;
   /// Solves may run concurrently in this many slots (threads), one slot per thread.
   static constexpr int kSlots = 2;
   /// Pattern over `nvertices` vertices (3 DOF each) from element vertex lists.
@@ -36,14 +32,14 @@ class SparseSystem : public HessianSink {
 
   void set_zero() { std::fill(values_.begin(), values_.end(), 0.0); }
   /// Current values (upper triangle, CSC order); copy/restore for a constant part.
-  Values& values() { return values_; }
+  std::vector<double>& values() { return values_; }
   void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override;
   void add_outer(const int* v, int nv, double c, const double* u) override;
   /// A sink with this system's pattern that adds into `values` (sized like values()) instead, so
   /// that two threads can assemble terms side by side and the caller sums the arrays after.
   class Buffer : public HessianSink {
    public:
-    Buffer(const SparseSystem& sys, Values& values) : sys_(sys), values_(values) {}
+    Buffer(const SparseSystem& sys, std::vector<double>& values) : sys_(sys), values_(values) {}
     void add(const int* v, int nv, const Eigen::Ref<const Eigen::MatrixXd>& H) override {
       sys_.add_to(values_, cursor_, v, nv, H);
     }
@@ -53,7 +49,7 @@ class SparseSystem : public HessianSink {
 
    private:
     const SparseSystem& sys_;
-    Values& values_;
+    std::vector<double>& values_;
     std::array<int, 2> cursor_{};  // see add_to
   };
   /// Precomputes the value positions of the 3- and 4-vertex elements given (their vertices must
@@ -106,19 +102,19 @@ class SparseSystem : public HessianSink {
   int position(int vi, int vj, int a, int b) const;  // vi <= vj
   // Adds H into `values`; `cursor` holds the sink's guesses of the next cached element of each
   // size (see add_to).
-  void add_to(Values& values, std::array<int, 2>& cursor, const int* v, int nv,
+  void add_to(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv,
               const Eigen::Ref<const Eigen::MatrixXd>& H) const;
   // The same for the rank-1 Hessian (c u) u^T (see HessianSink::add_outer).
-  void add_outer_to(Values& values, std::array<int, 2>& cursor, const int* v, int nv, double c,
+  void add_outer_to(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv, double c,
                     const double* u) const;
   // Adds element entry (i, j) = entry(i, j) at the cached or searched positions (see add_to).
   template <class Entry>
-  void add_element(Values& values, std::array<int, 2>& cursor, const int* v, int nv,
+  void add_element(std::vector<double>& values, std::array<int, 2>& cursor, const int* v, int nv,
                    const Entry& entry) const;
   int n_;
   std::vector<std::vector<int>> lower_;  // per vertex: sorted neighbours with smaller index
   Eigen::SparseMatrix<double> A_;       // upper triangle, compressed
-  Values values_;
+  std::vector<double> values_;
   std::vector<int> diag_;
   // Caches of the elements of 3 (index 0) and 4 (index 1) vertices: per element in the order
   // given, its nv x nv x 3 column-start positions (-1 below the diagonal); the keys (the vertex
