@@ -20,9 +20,9 @@
 
 #include "polycube/chart/labeling.h"
 #include "polycube/core/lbfgs.h"
+#include "polycube/core/memory.h"
 #include "polycube/core/parallel.h"
 #include "polycube/core/topology.h"
-#include "polycube/core/memory.h"
 #include "polycube/deform/energies.h"
 #include "polycube/deform/untangle.h"
 #include "polycube/tetra/tetrahedralize.h"
