@@ -6,14 +6,14 @@
 // first written: rocker's extraction (132k tets, from its saved deformation) made 2.1M page faults
 // and spent 37-43 s in the kernel on this virtual machine. With the kernel's transparent huge pages
 // in "madvise" mode (as on this project's Debian machines) or "always", a block marked
-// MADV_HUGEPAGE before it is touched faults in 2 MB pages: 0.1M faults, 22 s in the kernel, the
-// extraction 82-100 s -> 68-69 s, the same polycube to the bit. Only a hint: without huge pages
+// MADV_HUGEPAGE before it is touched faults in 2 MB pages: 0.1M faults, 22-27 s in the kernel,
+// the extraction 82-100 s -> 68-85 s (interleaved runs), the same polycube to the bit. Only a hint: without huge pages
 // (another kernel setting, another OS) nothing changes, and the contents and arithmetic are the
 // same.
 //
 // Not used for the deformation's SQP solver, which keeps one factor for the whole run: there
 // rocker's page faults fell 404k -> 68k with huge pages, but its assembly and line search measured
-// 1-5 s slower in three of three pairs of runs (the cause not found), so the gain did not show.
+// 1-5 s slower in five of five pairs of runs (the cause not found), so the gain did not show.
 #pragma once
 #include <cstddef>
 
