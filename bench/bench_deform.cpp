@@ -272,6 +272,14 @@ int main(int argc, char** argv) {
   app.add_option("--sqp-tolerance", sqp_tolerance,
                  "DeformOptions::sqp_tolerance (negative: the default for the mode)")
       ->capture_default_str();
+  double alpha0 = deform::DeformOptions{}.alpha0, eps0 = deform::DeformOptions{}.eps0;
+  app.add_option("--alpha0", alpha0, "DeformOptions::alpha0 for the volume runs (the schedule's first l1 weight)")
+      ->capture_default_str();
+  app.add_option("--eps0", eps0, "DeformOptions::eps0 for the volume runs (the schedule's first smoothing)")
+      ->capture_default_str();
+  bool double_factorization = false;
+  app.add_flag("--double-factorization", double_factorization,
+               "DeformOptions::float_factorization off: CHOLMOD's double factorizations (the CLI's --double-factorization)");
   bool locality_order = false;
   app.add_flag("--locality-order", locality_order, "DeformOptions::locality_order for the volume runs");
   bool neutral_barrier = false;
@@ -342,6 +350,9 @@ int main(int argc, char** argv) {
       deform::DeformOptions dopt;
       dopt.sqp_tolerance = sqp_tolerance;
       dopt.locality_order = locality_order;
+      dopt.alpha0 = alpha0;
+      dopt.float_factorization = !double_factorization;
+      dopt.eps0 = eps0;
       dopt.neutral_volume_barrier = neutral_barrier;
       dopt.volume_boost_factor = volume_boost;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {

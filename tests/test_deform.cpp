@@ -435,6 +435,83 @@ TEST(SparseSystem, FloatPreconditionerMatchesTheDoubleSolve) {
   EXPECT_EQ((small.precondition(c) - small.solve(c)).norm(), 0.0);
 }
 
+// DeformOptions::float_factorization: on a mesh whose factor is supernodal the deformation
+// factorizes in float and converges as with CHOLMOD's double factorizations (off).
+TEST(Deform, FloatFactorizationConvergesAsTheDoubleOne) {
+  auto s = sphere(3);
+  TetMesh tm = tet_mesh_of(s.V, s.F, 8000);
+  deform::DeformOptions on, off;
+  off.float_factorization = false;
+  const auto a = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, on);
+  const auto b = deform::deform_to_polycube(tm.V, tm.T, tm.boundary, off);
+  EXPECT_GT(a.float_factorizations, 0);
+  EXPECT_EQ(b.float_factorizations, 0);
+  for (const auto* r : {&a, &b}) {
+    EXPECT_TRUE(r->converged);
+    EXPECT_LT(r->l1_quality, 1e-3);
+    EXPECT_EQ(r->inverted, 0);
+  }
+  EXPECT_NEAR(a.arap, b.arap, 0.05 * b.arap);
+}
+
+// The float supernodal factorization (SparseSystem::set_float_factorization): its solves match the
+// double factorization's to float accuracy, the same bits from one factorization to the next, the
+// SQP's pair of solves refined by CG on it; a matrix that is not positive definite fails in float
+// (after the shifted tries) and in double alike.
+TEST(SparseSystem, FloatFactorizationMatchesTheDoubleOne) {
+  TetMesh tm, tm2;
+  auto dsys = sphere_system(3, 8000, tm);
+  auto fsys = sphere_system(3, 8000, tm2);
+  ASSERT_EQ(tm.T.rows(), tm2.T.rows());
+  ASSERT_TRUE(dsys->values() == fsys->values());
+  dsys->add_diagonal(1e-3 * dsys->mean_diagonal());
+  fsys->add_diagonal(1e-3 * fsys->mean_diagonal());
+  fsys->set_float_factorization(true);
+  ASSERT_TRUE(dsys->factorize());
+  ASSERT_TRUE(dsys->factor_ptr()->is_super) << "CHOLMOD chose a simplicial factor: the test needs a larger mesh";
+  ASSERT_TRUE(fsys->factorize());
+  EXPECT_EQ(fsys->float_factorizations(), 1);
+  EXPECT_EQ(fsys->float_breakdowns(), 0);
+  const int n = static_cast<int>(tm.V.rows());
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N01;
+  Eigen::VectorXd b(3 * n), b2(3 * n);
+  for (int i = 0; i < 3 * n; ++i) {
+    b[i] = N01(rng);
+    b2[i] = N01(rng);
+  }
+  const Eigen::VectorXd xd = dsys->solve(b), xd2 = dsys->solve(b2);
+  const Eigen::VectorXd xf = fsys->precondition(b);
+  EXPECT_GT((xf - xd).norm(), 0.0);  // float arithmetic, not a copy of the double factor
+  EXPECT_LE((xf - xd).norm(), 1e-4 * xd.norm());
+  ASSERT_TRUE(fsys->factorize());
+  EXPECT_EQ((fsys->precondition(b) - xf).norm(), 0.0);
+  Eigen::VectorXd x0, x1;
+  fsys->solve_pair(b, x0, b2, x1);
+  EXPECT_LE((x0 - xd).norm(), 1e-4 * xd.norm());
+  EXPECT_LE((x1 - xd2).norm(), 1e-4 * xd2.norm());
+  EXPECT_GT(fsys->refinement_iterations(), 0);
+  // The subtrees on two threads (the top part after them): the same solution to float accuracy,
+  // and the same bits from one factorization to the next.
+  fsys->set_float_parallel_entries(0);
+  ASSERT_TRUE(fsys->factorize());
+  const Eigen::VectorXd xp = fsys->precondition(b);
+  EXPECT_LE((xp - xd).norm(), 1e-4 * xd.norm());
+  ASSERT_TRUE(fsys->factorize());
+  EXPECT_EQ((fsys->precondition(b) - xp).norm(), 0.0);
+  // Not positive definite: the float factorization breaks down, and so does the double one made
+  // then; the next factorizations are in double.
+  const double mean = fsys->mean_diagonal();
+  fsys->add_diagonal(-10 * mean);
+  EXPECT_FALSE(fsys->factorize());
+  EXPECT_EQ(fsys->float_breakdowns(), 1);
+  const int in_float = fsys->float_factorizations();
+  fsys->add_diagonal(20 * mean);
+  ASSERT_TRUE(fsys->factorize());
+  EXPECT_EQ(fsys->float_factorizations(), in_float);
+  EXPECT_EQ(fsys->solve(b).size(), b.size());
+}
+
 // DeformOptions::locality_order: the solver works on renumbered interior vertices and sorted tets,
 // and gives the result back in the input's numbering (a wrong mapping would scramble the boundary).
 TEST(Deform, LocalityOrderGivesTheResultInTheInputNumbering) {

@@ -260,15 +260,10 @@ void backward2(int s_begin, int s_end, const int* super, const int* pi, const lo
 
 }  // namespace
 
-bool FloatFactor::assign(const cholmod_factor* L) {
-  n_ = 0;
-  if (!L || !L->is_super || !L->is_ll || L->itype != CHOLMOD_INT || L->xtype != CHOLMOD_REAL ||
-      L->dtype != CHOLMOD_DOUBLE || !L->x)
-    return false;
+void FloatFactor::set_structure(const cholmod_factor* L) {
   const int n = static_cast<int>(L->n), nsuper = static_cast<int>(L->nsuper);
   const int* super = static_cast<const int*>(L->super);
   const int* pi = static_cast<const int*>(L->pi);
-  const int* px = static_cast<const int*>(L->px);
   const int* srows = static_cast<const int*>(L->s);
   const int* perm = static_cast<const int*>(L->Perm);
   super_.assign(super, super + nsuper + 1);
@@ -280,7 +275,6 @@ bool FloatFactor::assign(const cholmod_factor* L) {
     perm_.resize(n);
     for (int i = 0; i < n; ++i) perm_[i] = i;
   }
-  const double* x = static_cast<const double*>(L->x);
   off_.resize(nsuper + 1);
   off_[0] = 0;
   for (int s = 0; s < nsuper; ++s) {
@@ -289,6 +283,22 @@ bool FloatFactor::assign(const cholmod_factor* L) {
   }
   x_.resize(static_cast<size_t>(off_[nsuper]));
   dinv_.resize(n);
+  max_rows_ = 0;
+  for (int s = 0; s < nsuper; ++s) max_rows_ = std::max(max_rows_, pi[s + 1] - pi[s]);
+  nsuper_ = nsuper;
+}
+
+bool FloatFactor::assign(const cholmod_factor* L) {
+  n_ = 0;
+  if (!L || !L->is_super || !L->is_ll || L->itype != CHOLMOD_INT || L->xtype != CHOLMOD_REAL ||
+      L->dtype != CHOLMOD_DOUBLE || !L->x)
+    return false;
+  const int n = static_cast<int>(L->n), nsuper = static_cast<int>(L->nsuper);
+  const int* super = static_cast<const int*>(L->super);
+  const int* pi = static_cast<const int*>(L->pi);
+  const int* px = static_cast<const int*>(L->px);
+  set_structure(L);  // (the structure analyze() saw, for SparseSystem: one analysis per pattern)
+  const double* x = static_cast<const double*>(L->x);
   for (int s = 0; s < nsuper; ++s) {
     const int nscol = super[s + 1] - super[s], nsrow = pi[s + 1] - pi[s], m = nsrow - nscol;
     const double* Ls = x + px[s];
@@ -301,11 +311,172 @@ bool FloatFactor::assign(const cholmod_factor* L) {
       std::transform(col + nscol, col + nsrow, R + static_cast<long>(j) * m, [](double v) { return static_cast<float>(v); });
     }
   }
-  max_rows_ = 0;
-  for (int s = 0; s < nsuper; ++s) max_rows_ = std::max(max_rows_, pi[s + 1] - pi[s]);
-  nsuper_ = nsuper;
   n_ = n;
   partition();
+  return true;
+}
+
+}  // namespace polycube::deform
+
+// The BLAS and LAPACK kernels of the float factorization (Fortran interface).
+extern "C" {
+void ssyrk_(const char* uplo, const char* trans, const int* n, const int* k, const float* alpha, const float* a,
+            const int* lda, const float* beta, float* c, const int* ldc);
+void sgemm_(const char* transa, const char* transb, const int* m, const int* n, const int* k, const float* alpha,
+            const float* a, const int* lda, const float* b, const int* ldb, const float* beta, float* c,
+            const int* ldc);
+void spotrf_(const char* uplo, const int* n, float* a, const int* lda, int* info);
+void strsm_(const char* side, const char* uplo, const char* transa, const char* diag, const int* m, const int* n,
+            const float* alpha, const float* a, const int* lda, float* b, const int* ldb);
+}
+
+namespace polycube::deform {
+
+bool FloatFactor::analyze(const cholmod_factor* L, const int* Ap, const int* Ai) {
+  n_ = 0;
+  a_dest_.clear();
+  if (!L || !L->is_super || L->itype != CHOLMOD_INT || !L->super || !L->pi || !L->s) return false;
+  set_structure(L);
+  const int n = static_cast<int>(L->n);
+  analyzed_n_ = n;
+  col_super_.resize(n);
+  for (int s = 0; s < nsuper_; ++s)
+    for (int k = super_[s]; k < super_[s + 1]; ++k) col_super_[k] = s;
+  std::vector<int> pinv(n);
+  for (int k = 0; k < n; ++k) pinv[perm_[k]] = k;
+  a_dest_.resize(static_cast<size_t>(Ap[n]));
+  for (int j = 0; j < n; ++j)
+    for (int p = Ap[j]; p < Ap[j + 1]; ++p) {
+      const int a = pinv[Ai[p]], b = pinv[j];
+      const int c = std::min(a, b), r = std::max(a, b);
+      const int s = col_super_[c];
+      const int k1 = super_[s], nscol = super_[s + 1] - k1, nsrow = pi_[s + 1] - pi_[s], m = nsrow - nscol;
+      const int jc = c - k1;
+      if (r < super_[s + 1]) {  // in the diagonal block
+        const int ir = r - k1;
+        a_dest_[p] = ir == jc ? -1L - c : off_[s] + static_cast<long>(m) * nscol + tri_offset(nscol, jc) + (ir - jc - 1);
+      } else {
+        const int* rows = s_.data() + pi_[s] + nscol;
+        const int ir = static_cast<int>(std::lower_bound(rows, rows + m, r) - rows);
+        if (ir >= m || rows[ir] != r) {  // not in the factor's pattern: not this matrix's analysis
+          a_dest_.clear();
+          return false;
+        }
+        a_dest_[p] = off_[s] + ir + static_cast<long>(jc) * m;
+      }
+    }
+  n_ = n;  // (partition() reads it)
+  partition();
+  n_ = 0;  // nothing to solve with before factorize()
+  return true;
+}
+
+bool FloatFactor::factorize(const double* Ax, double shift) {
+  n_ = 0;
+  if (a_dest_.empty()) return false;
+  const int n = analyzed_n_;
+  std::fill(x_.begin(), x_.end(), 0.0f);
+  std::fill(dinv_.begin(), dinv_.end(), 0.0f);
+  for (size_t p = 0; p < a_dest_.size(); ++p) {
+    const long d = a_dest_[p];
+    if (d >= 0)
+      x_[static_cast<size_t>(d)] += static_cast<float>(Ax[p]);
+    else
+      dinv_[static_cast<size_t>(-1 - d)] += static_cast<float>(Ax[p] + shift);  // the diagonal, for now
+  }
+  // Left-looking: supernode s gathers the updates of its descendants d (the supernodes whose rows
+  // below their diagonal block reach s's columns), listed in head[t][s] / next[d] (t: the thread
+  // that factorized d); lpos[d] is the first of d's rows not yet used. The subtrees of partition()
+  // are factorized on two threads (their descendants are their own), each with a one-thread BLAS,
+  // then the top part on this thread with the BLAS's threads.
+  std::array<std::vector<int>, 2> head;
+  for (auto& h : head) h.assign(nsuper_, -1);
+  std::vector<int> next(nsuper_, -1), lpos(nsuper_, 0);
+  struct Scratch {
+    std::vector<int> map;
+    std::vector<float> D, C;
+  };
+  std::array<Scratch, 2> scratch;
+  const float one = 1.0f, zero = 0.0f;
+  const char L = 'L', N = 'N', T = 'T', R = 'R';
+  // Factorizes supernode s on thread t; false if a pivot is not positive.
+  auto supernode_step = [&](int s, int t) {
+    Scratch& w = scratch[t];
+    if (w.map.empty()) w.map.assign(n, 0);
+    const int k1 = super_[s], k2 = super_[s + 1], nscol = k2 - k1, nsrow = pi_[s + 1] - pi_[s], m = nsrow - nscol;
+    const int* rows = s_.data() + pi_[s];
+    for (int k = 0; k < nsrow; ++k) w.map[rows[k]] = k;
+    float* Rs = x_.data() + off_[s];
+    float* Ts = Rs + static_cast<long>(m) * nscol;
+    std::vector<float>& D = w.D;
+    D.assign(static_cast<size_t>(nscol) * nscol, 0.0f);
+    for (int j = 0; j < nscol; ++j) {
+      D[static_cast<size_t>(j) * nscol + j] = dinv_[k1 + j];
+      for (int i = j + 1; i < nscol; ++i) D[static_cast<size_t>(j) * nscol + i] = Ts[tri_offset(nscol, j) + (i - j - 1)];
+    }
+    for (int list = 0; list < 2; ++list) {
+      for (int d = head[list][s]; d >= 0;) {
+        const int dnext = next[d];
+        const int nd = super_[d + 1] - super_[d], md = pi_[d + 1] - pi_[d] - nd;
+        const int* drows = s_.data() + pi_[d] + nd;
+        const int p1 = lpos[d];
+        int p2 = p1;
+        while (p2 < md && drows[p2] < k2) ++p2;
+        const int n1 = p2 - p1, n2 = md - p1, n3 = n2 - n1;
+        const float* Ad = x_.data() + off_[d] + p1;  // rows p1.. of d's block below its diagonal, ld md
+        w.C.resize(static_cast<size_t>(n2) * n1);
+        float* C = w.C.data();
+        ssyrk_(&L, &N, &n1, &nd, &one, Ad, &md, &zero, C, &n2);
+        if (n3 > 0) sgemm_(&N, &T, &n3, &n1, &nd, &one, Ad + n1, &md, Ad, &md, &zero, C + n1, &n2);
+        for (int jj = 0; jj < n1; ++jj) {
+          const int col = drows[p1 + jj] - k1;
+          const float* c = C + static_cast<size_t>(jj) * n2;
+          float* Dc = D.data() + static_cast<size_t>(col) * nscol - k1;
+          for (int ii = jj; ii < n1; ++ii) Dc[drows[p1 + ii]] -= c[ii];
+          float* Rc = Rs + static_cast<long>(col) * m - nscol;
+          for (int ii = n1; ii < n2; ++ii) Rc[w.map[drows[p1 + ii]]] -= c[ii];
+        }
+        lpos[d] = p2;
+        if (p2 < md) {
+          const int a = col_super_[drows[p2]];
+          next[d] = head[t][a];
+          head[t][a] = d;
+        }
+        d = dnext;
+      }
+      head[list][s] = -1;
+    }
+    int info = 0;
+    spotrf_(&L, &nscol, D.data(), &nscol, &info);
+    if (info != 0) return false;
+    if (m > 0) strsm_(&R, &L, &T, &N, &m, &nscol, &one, D.data(), &nscol, Rs, &m);
+    for (int j = 0; j < nscol; ++j) {
+      dinv_[k1 + j] = 1.0f / D[static_cast<size_t>(j) * nscol + j];
+      for (int i = j + 1; i < nscol; ++i) Ts[tri_offset(nscol, j) + (i - j - 1)] = D[static_cast<size_t>(j) * nscol + i];
+    }
+    if (m > 0) {
+      lpos[s] = 0;
+      const int a = col_super_[rows[nscol]];
+      next[s] = head[t][a];
+      head[t][a] = s;
+    }
+    return true;
+  };
+  std::array<bool, 2> ok{true, true};
+  if (x_.size() >= parallel_entries_) {
+    run_pair([&](int t) {
+      for (const auto& r : ranges_[t])
+        for (int s = r[0]; s < r[1] && ok[t]; ++s) ok[t] = supernode_step(s, t);
+    });
+    if (!ok[0] || !ok[1]) return false;
+    for (const auto& r : top_ranges_)
+      for (int s = r[0]; s < r[1]; ++s)
+        if (!supernode_step(s, 0)) return false;
+  } else {
+    for (int s = 0; s < nsuper_; ++s)
+      if (!supernode_step(s, 0)) return false;
+  }
+  n_ = n;
   return true;
 }
 

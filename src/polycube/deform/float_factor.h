@@ -1,4 +1,5 @@
-// A single-precision copy of a CHOLMOD supernodal LL^T factor, for preconditioning.
+// A single-precision supernodal LL^T factor, for preconditioning: a copy of CHOLMOD's double
+// factor, or factorized here in float from CHOLMOD's symbolic analysis (analyze, factorize).
 //
 // The SQP solver's conjugate gradients apply a Cholesky factor of an older Hessian hundreds of
 // times per run; each application is a forward and a backward triangular solve, which reads the
@@ -21,6 +22,17 @@ class FloatFactor {
   bool assign(const cholmod_factor* L);
   bool empty() const { return n_ == 0; }
   int size() const { return n_; }
+  /// Prepares factorize(): the structure of the supernodal symbolic factor L (CHOLMOD's analysis,
+  /// int indices) and, per stored entry of the n x n matrix A (upper triangle, CSC: Ap, Ai), its
+  /// place in the factor. False, and nothing prepared, if L is not supernodal with int indices.
+  bool analyze(const cholmod_factor* L, const int* Ap, const int* Ai);
+  /// Numeric factorization of A (the values of the pattern given to analyze, in its order) in
+  /// single precision, left-looking over the supernodes as CHOLMOD's (its BLAS calls in float:
+  /// about twice the speed of CHOLMOD's double factorization). The result replaces the copy, for
+  /// solve() and solve2(). False if a pivot is not positive in float (the copy is empty then).
+  /// shift: added to every diagonal entry first (the factor is then a preconditioner of A).
+  bool factorize(const double* Ax, double shift = 0);
+  bool analyzed() const { return !a_dest_.empty(); }
   /// x = A^-1 b with A = P^T L L^T P, in float. `work` is the caller's scratch (one per thread).
   void solve(const double* b, double* x, std::vector<float>& work) const;
   /// x0 = A^-1 b0 and x1 = A^-1 b1 at once, on two threads when the machine has them: the factor is
@@ -47,6 +59,12 @@ class FloatFactor {
   std::vector<std::array<int, 2>> top_ranges_;
   std::vector<signed char> owner_;
   size_t parallel_entries_ = kParallelEntries;
+  // analyze(): per entry of A, its place in x_ (>= 0) or, as -1 - k, on the diagonal of column k;
+  // per column, its supernode; the analyzed pattern's size.
+  std::vector<long> a_dest_;
+  std::vector<int> col_super_;
+  int analyzed_n_ = 0;
+  void set_structure(const cholmod_factor* L);
   void partition();
 };
 

@@ -311,6 +311,10 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   std::vector<double> side_values(arap_values.size(), 0.0);  // the volume terms' Hessian (see evaluate)
   SparseSystem::Buffer side(sys, side_values);
   const double arap_diag = sys.mean_diagonal();
+  // Every term is invariant under translations: the damping mu (1e-8 of the ARAP diagonal, below)
+  // alone holds those three directions, far under float's resolution. The float factorizations
+  // get 1e-5 of it on the diagonal instead (see DeformOptions::float_factorization).
+  sys.set_float_factorization(opt.float_factorization, 1e-5 * arap_diag);
   std::vector<double> assembled;  // the merit energy's Hessian approximation, before the damping
 
   double t_rot = 0, t_asm = 0, t_fac = 0, t_ls = 0, t_numfac = 0;
@@ -561,7 +565,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     std::ostringstream os;
     os << "deformation time: rotation " << t_rot << " s, assembly " << t_asm << " s, factorization+solve " << t_fac
        << " s (numeric factorizations " << t_numfac << " s), line search " << t_ls << " s (" << n_ls << " energy evaluations); " << factorizations
-       << " factorizations, " << cg_iterations << " preconditioned CG iterations (and " << cg_failed_iterations
+       << " factorizations (" << sys.float_factorizations() << " in float, " << sys.float_breakdowns()
+       << " float breakdowns, " << sys.refinement_iterations() << " CG iterations refining their solves), " << cg_iterations << " preconditioned CG iterations (and " << cg_failed_iterations
        << " in " << cg_failures << " solves over the limit); system " << sys.values().size() << " nonzeros, factor "
        << sys.factor_nonzeros() << " nonzeros, " << sys.factor_flops() << " flops";
     hooks.debug(os.str());
@@ -583,6 +588,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.thickness_pairs = static_cast<int>(p.thickness.size());
   if (!p.thickness.empty()) res.thin_crushed_after = crushed_fraction(X, B, p.thickness, opt.thickness_keep);
   res.factorizations = factorizations;
+  res.float_factorizations = sys.float_factorizations();
   res.volume_barrier_weight = p.volume_weight;
   res.boosted_tets = static_cast<int>(std::count_if(p.boost.begin(), p.boost.end(), [](double b) { return b > 1; }));
   if (!p.surface)

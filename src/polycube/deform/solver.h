@@ -137,6 +137,22 @@ struct DeformOptions {
   /// 27.8 -> 25.1 s, bumpy torus 112k 64.9 -> 52.5 s, rocker 132k 66.5 -> 61.4 s, the same ARAP
   /// and l1_quality < 1e-3; 0.35 and 0.7 were slower on two of the four each.
   double cg_refactor_fraction = 0.5;
+  /// Volume mode, supernodal factors: the SQP systems are factorized in single precision
+  /// (FloatFactor::factorize: CHOLMOD's symbolic analysis, our left-looking numeric factorization
+  /// with float BLAS, the two subtrees of the elimination tree on two threads), with 1e-5 of the
+  /// ARAP diagonal added to the diagonal: every term is invariant under translations, and the
+  /// damping mu (1e-8 of it) that alone holds those directions lies under float's resolution
+  /// (unshifted, a third of rocker's float factorizations broke down). The direction after a
+  /// factorization is CG on its factor to SparseSystem::kRefineTolerance (about two iterations),
+  /// and the factor preconditions the next systems as the float copy of CHOLMOD's did. Where a
+  /// float factorization breaks down anyway (also with 100 times the shift), CHOLMOD's double one
+  /// takes over for the rest of the run. Measured (`polycube_bench --deform-only`, one run each,
+  /// the same hour, off -> on): rocker 132k tets 65.4 -> 62.1 s (its factorizations 2.3 -> 1.1 s
+  /// each; CLI pairs 70.3 / 70.5 -> 57.2 s), bumpy torus 113k 50.6 -> 41.9 s, tet/hand 22.0 ->
+  /// 16.1 s, fandisk 6.66 -> 6.44 s, but the rod 26.6 -> 30.4 s (its path changed: 61 -> 73 SQP
+  /// iterations); the ten models 178.5 -> 163.8 s in all, l1_quality under 1e-3 and ARAP within
+  /// 1% on each. false: CHOLMOD's double factorizations and their float copies.
+  bool float_factorization = true;
   /// Volume mode: inside the deformation, renumber the interior vertices (those on no boundary
   /// triangle, among their own ids) along a Morton curve and sort the tets by their smallest
   /// vertex, so that the assembly's and the solves' scattered accesses stay local; the result is
@@ -180,6 +196,7 @@ struct DeformResult {
   double border_quality = 0; ///< open surfaces: sum|e|_1 / sum|e|_2 - 1 over the border edges
   int iterations = 0, alpha_steps = 0, inverted = 0;
   int factorizations = 0;    ///< sparse Cholesky factorizations made
+  int float_factorizations = 0;  ///< of those, made in single precision (DeformOptions::float_factorization)
   double volume_barrier_weight = 0;  ///< final (possibly raised) volume-barrier weight
   int boosted_tets = 0;      ///< tets whose volume barrier was raised (they blocked a full step)
   /// Volume mode: tets left with under kCrushedRatio of their rest volume (nearly flat; such tets

@@ -188,7 +188,32 @@ bool SparseSystem::factorize() {
     llt_->cholmod().print = 0;  // the library never prints
     llt_->analyzePattern(A_);
     analyzed_ = true;
+    if (float_wanted_) float_factor_.analyze(llt_->factor(), A_.outerIndexPtr(), A_.innerIndexPtr());
   }
+  if (float_wanted_ && float_factor_.analyzed()) {
+    // A pivot that is not positive in float: once more with 100 times the shift, then, if that
+    // fails too, the double factorization from then on (with a diagonal shifted further, a float
+    // factor is a poor preconditioner: relative shifts of 1e-5 on every diagonal entry gave the
+    // rod 7 solves over the limit and 20 factorizations instead of 13).
+    for (const double shift : {float_shift_, 100 * float_shift_}) {
+      if (float_factor_.factorize(values_.data(), shift)) {
+        ++float_factorizations_;
+        float_only_ = true;
+        return true;
+      }
+      ++float_breakdowns_;
+      if (float_shift_ <= 0) break;
+    }
+    float_wanted_ = false;
+  }
+  return factorize_double();
+}
+
+bool SparseSystem::factorize_double() {
+  float_only_ = false;
+  factorization_blas_threads();
+  const SerialOpenMP serial_openmp;
+  std::copy(values_.begin(), values_.end(), A_.valuePtr());
   llt_->factorize(A_);
   if (llt_->info() != Eigen::Success) {
     float_factor_.assign(nullptr);
@@ -213,6 +238,13 @@ double SparseSystem::factor_flops() const { return llt_ ? llt_->cholmod().fl : 0
 
 Eigen::VectorXd SparseSystem::solve(const Eigen::VectorXd& b, int slot) const {
   POLYCUBE_ASSERT(llt_ && slot >= 0 && slot < kSlots, "solve without a factorization or with a bad slot");
+  if (float_only_) {
+    // The float factor of the current values: refined to double accuracy by CG.
+    Eigen::VectorXd x;
+    const int its = solve_pcg(b, x, 1e-12, 100, slot);
+    POLYCUBE_ASSERT(its > 0, "CG on the float factor did not converge");
+    return x;
+  }
   Slot& s = slots_[slot];
   cholmod_dense B{};
   B.nrow = static_cast<size_t>(b.size());
@@ -360,7 +392,22 @@ std::array<int, 2> SparseSystem::solve_pcg_pair(const Eigen::VectorXd& b0, Eigen
 }
 
 void SparseSystem::solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
-                              Eigen::VectorXd& x1) const {
+                              Eigen::VectorXd& x1) {
+  if (float_only_) {
+    // CG on the float factor of these very values: a few iterations to 1e-3 (the SQP direction
+    // needs no more; the reused factors' solves stop at 1e-2).
+    const auto its = solve_pcg_pair(b0, x0, b1, x1, kRefineTolerance, 50);
+    if (its[0] > 0 && its[1] > 0) {
+      refinement_iterations_ += std::max(its[0], its[1]);
+      return;
+    }
+    // Not converged (the float factor too far from the matrix): the double factorization.
+    if (!factorize_double()) {
+      x0 = b0;  // (positive definite in float, so this does not happen)
+      x1 = b1;
+      POLYCUBE_ASSERT(false, "the double factorization failed after the float one succeeded");
+    }
+  }
   run_pair([&](int k) { (k == 0 ? x0 : x1) = solve(k == 0 ? b0 : b1, k); });
 }
 

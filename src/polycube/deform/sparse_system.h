@@ -61,7 +61,23 @@ class SparseSystem : public HessianSink {
   double mean_diagonal() const;
 
   /// Numeric factorization (symbolic analysis on first call). False if not positive definite.
+  /// With set_float_factorization(true) and a supernodal analysis, the factorization is made in
+  /// single precision (FloatFactor::factorize) and CHOLMOD's double one only where a float pivot
+  /// is not positive; solve() and solve_pair() then refine with conjugate gradients.
   bool factorize();
+  /// Off by default; to be set before the first factorize(). `shift` is added to the diagonal of
+  /// the float factorizations only (see DeformOptions::float_factorization).
+  void set_float_factorization(bool on, double shift = 0) {
+    float_wanted_ = on;
+    float_shift_ = shift;
+  }
+  /// Factorizations made in float, and float factorizations that broke down (then made in double).
+  int float_factorizations() const { return float_factorizations_; }
+  /// Tests: the float factor's two-thread threshold (FloatFactor::set_parallel_entries).
+  void set_float_parallel_entries(size_t n) { float_factor_.set_parallel_entries(n); }
+  int float_breakdowns() const { return float_breakdowns_; }
+  /// Preconditioned CG iterations spent by solve_pair on the float factor of the current values.
+  int refinement_iterations() const { return refinement_iterations_; }
   /// Cost model of the last factorization, from CHOLMOD's symbolic analysis (deterministic, unlike
   /// timings): floating-point operations of a factorization over those of one preconditioned CG
   /// iteration (two triangular solves with the factor and one product with the matrix).
@@ -93,8 +109,11 @@ class SparseSystem : public HessianSink {
   std::array<int, 2> solve_pcg_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
                                     Eigen::VectorXd& x1, double tol, int max_iter) const;
   /// x0 = A^-1 b0 and x1 = A^-1 b1 with the last factorization, on two threads when available.
+  /// After a float factorization: CG on it to kRefineTolerance (the double factorization made if
+  /// that fails).
   void solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, const Eigen::VectorXd& b1,
-                  Eigen::VectorXd& x1) const;
+                  Eigen::VectorXd& x1);
+  static constexpr double kRefineTolerance = 1e-3;
   int dofs() const { return 3 * n_; }
   cholmod_factor* factor_ptr() const { return llt_ ? llt_->factor() : nullptr; }
 
@@ -138,6 +157,11 @@ class SparseSystem : public HessianSink {
   };
   mutable std::array<Slot, kSlots> slots_;
   bool analyzed_ = false;
+  bool float_wanted_ = false, float_only_ = false;  // float_only_: no double factor of the current values
+  int float_factorizations_ = 0, float_breakdowns_ = 0;
+  double float_shift_ = 0;
+  mutable int refinement_iterations_ = 0;
+  bool factorize_double();
   FloatFactor float_factor_;  // single-precision copy of llt_'s factor (empty if not supernodal)
 };
 

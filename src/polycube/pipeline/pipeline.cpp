@@ -510,6 +510,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         // One record of the whole deformation.
         next.iterations += dr.iterations;
         next.factorizations += dr.factorizations;
+        next.float_factorizations += dr.float_factorizations;
         next.seconds += dr.seconds;
         next.rotation = next.rotation * dr.rotation;
         for (auto& h : next.history) {
@@ -580,6 +581,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"converged", dr.converged},
                  {"seconds", dr.seconds},
                  {"factorizations", dr.factorizations},
+                 {"float_factorizations", dr.float_factorizations},
                  {"distortion", opt.surface ? "surface_arap" : "volume_arap"},
                  {"volume_barrier_weight", dr.volume_barrier_weight},
                  {"boosted_tets", dr.boosted_tets},
