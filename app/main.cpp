@@ -216,10 +216,9 @@ int main(int argc, char** argv) {
   app.add_flag("--no-lagrangian-hessian", plain_hessian,
                "Polycube deformation: leave the area constraint's curvature out of the SQP Hessian (slower "
                "convergence; for comparison)");
-  bool double_factorization = false;
-  app.add_flag("--double-factorization", double_factorization,
-               "Polycube deformation: factorize the SQP systems in double precision with CHOLMOD (slower; by default they "
-               "are factorized in single precision and the solves refined by CG)");
+  app.add_flag("--float-factorization", d.float_factorization,
+               "Polycube deformation (volume): factorize the SQP systems in single precision and refine the solves by CG "
+               "(about twice as fast per factorization; it changes the SQP path, hence the polycube extraction's)");
   app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
       ->capture_default_str()->check(CLI::Range(1, 100));
   app.add_option("--sqp-tolerance", d.sqp_tolerance,
@@ -440,7 +439,6 @@ int main(int argc, char** argv) {
 
   if (no_rotation) opt.deform.global_rotation = false;
   if (plain_hessian) opt.deform.lagrangian_hessian = false;
-  if (double_factorization) opt.deform.float_factorization = false;
   opt.deform.rescue_from_step = rescue_step - 1;
   if (no_creases) opt.quad.capture_creases = false;
   opt.quad.sharp_angle_deg = hx.sharp_angle_deg;

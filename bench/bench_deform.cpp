@@ -277,9 +277,9 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--eps0", eps0, "DeformOptions::eps0 for the volume runs (the schedule's first smoothing)")
       ->capture_default_str();
-  bool double_factorization = false;
-  app.add_flag("--double-factorization", double_factorization,
-               "DeformOptions::float_factorization off: CHOLMOD's double factorizations (the CLI's --double-factorization)");
+  bool float_factorization = false;
+  app.add_flag("--float-factorization", float_factorization,
+               "DeformOptions::float_factorization for the volume runs (the CLI's --float-factorization)");
   bool locality_order = false;
   app.add_flag("--locality-order", locality_order, "DeformOptions::locality_order for the volume runs");
   bool neutral_barrier = false;
@@ -351,7 +351,7 @@ int main(int argc, char** argv) {
       dopt.sqp_tolerance = sqp_tolerance;
       dopt.locality_order = locality_order;
       dopt.alpha0 = alpha0;
-      dopt.float_factorization = !double_factorization;
+      dopt.float_factorization = float_factorization;
       dopt.eps0 = eps0;
       dopt.neutral_volume_barrier = neutral_barrier;
       dopt.volume_boost_factor = volume_boost;

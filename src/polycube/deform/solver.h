@@ -144,15 +144,18 @@ struct DeformOptions {
   /// damping mu (1e-8 of it) that alone holds those directions lies under float's resolution
   /// (unshifted, a third of rocker's float factorizations broke down). The direction after a
   /// factorization is CG on its factor to SparseSystem::kRefineTolerance (about two iterations),
-  /// and the factor preconditions the next systems as the float copy of CHOLMOD's did. Where a
+  /// and the factor preconditions the next systems as the float copy of CHOLMOD's does. Where a
   /// float factorization breaks down anyway (also with 100 times the shift), CHOLMOD's double one
   /// takes over for the rest of the run. Measured (`polycube_bench --deform-only`, one run each,
   /// the same hour, off -> on): rocker 132k tets 65.4 -> 62.1 s (its factorizations 2.3 -> 1.1 s
   /// each; CLI pairs 70.3 / 70.5 -> 57.2 s), bumpy torus 113k 50.6 -> 41.9 s, tet/hand 22.0 ->
   /// 16.1 s, fandisk 6.66 -> 6.44 s, but the rod 26.6 -> 30.4 s (its path changed: 61 -> 73 SQP
   /// iterations); the ten models 178.5 -> 163.8 s in all, l1_quality under 1e-3 and ARAP within
-  /// 1% on each. false: CHOLMOD's double factorizations and their float copies.
-  bool float_factorization = true;
+  /// 1% on each. Off by default: it changes the SQP path, and the polycube extraction after it
+  /// depends on the path's last digits. With it, rod, fandisk, bumpy torus and rocker gave the
+  /// same charts, corners and polycube ARAP (within 0.3%), but rocker's extraction took 405 s
+  /// once (25 edge collapses; 89 s in another run, 68-85 s without it).
+  bool float_factorization = false;
   /// Volume mode: inside the deformation, renumber the interior vertices (those on no boundary
   /// triangle, among their own ids) along a Morton curve and sort the tets by their smallest
   /// vertex, so that the assembly's and the solves' scattered accesses stay local; the result is
