@@ -1,5 +1,6 @@
 // The l1 polycube deformation on shapes with known answers.
 #include <algorithm>
+#include <array>
 #include <memory>
 #include <random>
 
@@ -38,6 +39,18 @@ std::unique_ptr<deform::SparseSystem> sphere_system(int subdivisions, int tets, 
   deform::arap_energy(tm.V, tm.T, rest, 1.0, nullptr, sys.get());
   deform::volume_barrier_energy(tm.V, tm.T, rest, 0.1, nullptr, sys.get());
   return sys;
+}
+
+// Two vectors of standard normal entries (drawn alternately, from one generator).
+std::array<Eigen::VectorXd, 2> random_pair(int size, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> N01;
+  std::array<Eigen::VectorXd, 2> v{Eigen::VectorXd(size), Eigen::VectorXd(size)};
+  for (int i = 0; i < size; ++i) {
+    v[0][i] = N01(rng);
+    v[1][i] = N01(rng);
+  }
+  return v;
 }
 
 }  // namespace
@@ -284,13 +297,7 @@ TEST(SparseSystem, SolvesSideBySideMatchOneByOne) {
   const deform::ArapRest rest = deform::ArapRest::build(tm.V, tm.T);
   sys.add_diagonal(1e-6);
   ASSERT_TRUE(sys.factorize());
-  std::mt19937 rng(7);
-  std::normal_distribution<double> N01;
-  Eigen::VectorXd b0(3 * n), b1(3 * n);
-  for (int i = 0; i < 3 * n; ++i) {
-    b0[i] = N01(rng);
-    b1[i] = N01(rng);
-  }
+  const auto [b0, b1] = random_pair(3 * n, 7);
   Eigen::VectorXd x0, x1;
   sys.solve_pair(b0, x0, b1, x1);
   const Eigen::VectorXd y0 = sys.solve(b0), y1 = sys.solve(b1);
@@ -473,13 +480,7 @@ TEST(SparseSystem, FloatFactorizationMatchesTheDoubleOne) {
   EXPECT_EQ(fsys->float_factorizations(), 1);
   EXPECT_EQ(fsys->float_breakdowns(), 0);
   const int n = static_cast<int>(tm.V.rows());
-  std::mt19937 rng(5);
-  std::normal_distribution<double> N01;
-  Eigen::VectorXd b(3 * n), b2(3 * n);
-  for (int i = 0; i < 3 * n; ++i) {
-    b[i] = N01(rng);
-    b2[i] = N01(rng);
-  }
+  const auto [b, b2] = random_pair(3 * n, 5);
   const Eigen::VectorXd xd = dsys->solve(b), xd2 = dsys->solve(b2);
   const Eigen::VectorXd xf = fsys->precondition(b);
   EXPECT_GT((xf - xd).norm(), 0.0);  // float arithmetic, not a copy of the double factor
