@@ -297,7 +297,8 @@ bool FloatFactor::assign(const cholmod_factor* L) {
   const int* super = static_cast<const int*>(L->super);
   const int* pi = static_cast<const int*>(L->pi);
   const int* px = static_cast<const int*>(L->px);
-  set_structure(L);  // (the structure analyze() saw, for SparseSystem: one analysis per pattern)
+  if (L != analyzed_for_) a_dest_.clear();  // another factor: analyze() again before factorize()
+  set_structure(L);
   const double* x = static_cast<const double*>(L->x);
   for (int s = 0; s < nsuper; ++s) {
     const int nscol = super[s + 1] - super[s], nsrow = pi[s + 1] - pi[s], m = nsrow - nscol;
@@ -339,6 +340,7 @@ bool FloatFactor::analyze(const cholmod_factor* L, const int* Ap, const int* Ai)
   set_structure(L);
   const int n = static_cast<int>(L->n);
   analyzed_n_ = n;
+  analyzed_for_ = L;
   col_super_.resize(n);
   for (int s = 0; s < nsuper_; ++s)
     for (int k = super_[s]; k < super_[s + 1]; ++k) col_super_[k] = s;

@@ -64,6 +64,7 @@ class FloatFactor {
   std::vector<long> a_dest_;
   std::vector<int> col_super_;
   int analyzed_n_ = 0;
+  const cholmod_factor* analyzed_for_ = nullptr;  // the factor analyze() read (assign() of it keeps the map)
   void set_structure(const cholmod_factor* L);
   void partition();
 };
