@@ -402,11 +402,8 @@ void SparseSystem::solve_pair(const Eigen::VectorXd& b0, Eigen::VectorXd& x0, co
       return;
     }
     // Not converged (the float factor too far from the matrix): the double factorization.
-    if (!factorize_double()) {
-      x0 = b0;  // (positive definite in float, so this does not happen)
-      x1 = b1;
-      POLYCUBE_ASSERT(false, "the double factorization failed after the float one succeeded");
-    }
+    const bool factorized = factorize_double();  // (positive definite in float: it does not fail)
+    POLYCUBE_ASSERT(factorized, "the double factorization failed after the float one succeeded");
   }
   run_pair([&](int k) { (k == 0 ? x0 : x1) = solve(k == 0 ? b0 : b1, k); });
 }
