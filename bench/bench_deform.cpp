@@ -351,8 +351,8 @@ int main(int argc, char** argv) {
       dopt.sqp_tolerance = sqp_tolerance;
       dopt.locality_order = locality_order;
       dopt.alpha0 = alpha0;
-      dopt.float_factorization = float_factorization;
       dopt.eps0 = eps0;
+      dopt.float_factorization = float_factorization;
       dopt.neutral_volume_barrier = neutral_barrier;
       dopt.volume_boost_factor = volume_boost;
       if (!m.paper_row.empty() && paper.count(m.paper_row)) {

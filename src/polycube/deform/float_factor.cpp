@@ -339,7 +339,6 @@ bool FloatFactor::analyze(const cholmod_factor* L, const int* Ap, const int* Ai)
   if (!L || !L->is_super || L->itype != CHOLMOD_INT || !L->super || !L->pi || !L->s) return false;
   set_structure(L);
   const int n = static_cast<int>(L->n);
-  analyzed_n_ = n;
   analyzed_for_ = L;
   col_super_.resize(n);
   for (int s = 0; s < nsuper_; ++s)
@@ -376,7 +375,7 @@ bool FloatFactor::analyze(const cholmod_factor* L, const int* Ap, const int* Ai)
 bool FloatFactor::factorize(const double* Ax, double shift) {
   n_ = 0;
   if (a_dest_.empty()) return false;
-  const int n = analyzed_n_;
+  const int n = static_cast<int>(perm_.size());
   std::fill(x_.begin(), x_.end(), 0.0f);
   std::fill(dinv_.begin(), dinv_.end(), 0.0f);
   for (size_t p = 0; p < a_dest_.size(); ++p) {
@@ -465,7 +464,7 @@ bool FloatFactor::factorize(const double* Ax, double shift) {
     return true;
   };
   std::array<bool, 2> ok{true, true};
-  if (x_.size() >= parallel_entries_) {
+  if (parallel()) {
     run_pair([&](int t) {
       for (const auto& r : ranges_[t])
         for (int s = r[0]; s < r[1] && ok[t]; ++s) ok[t] = supernode_step(s, t);

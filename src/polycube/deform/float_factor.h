@@ -60,10 +60,9 @@ class FloatFactor {
   std::vector<signed char> owner_;
   size_t parallel_entries_ = kParallelEntries;
   // analyze(): per entry of A, its place in x_ (>= 0) or, as -1 - k, on the diagonal of column k;
-  // per column, its supernode; the analyzed pattern's size.
+  // per column, its supernode.
   std::vector<long> a_dest_;
   std::vector<int> col_super_;
-  int analyzed_n_ = 0;
   const cholmod_factor* analyzed_for_ = nullptr;  // the factor analyze() read (assign() of it keeps the map)
   void set_structure(const cholmod_factor* L);
   void partition();

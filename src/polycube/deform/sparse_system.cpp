@@ -181,8 +181,7 @@ void factorization_blas_threads() {
 bool SparseSystem::factorize() {
   factorization_blas_threads();
   const SerialOpenMP serial_openmp;
-  std::copy(values_.begin(), values_.end(), A_.valuePtr());
-  if (!analyzed_) {
+  if (!analyzed_) {  // (the pattern only; factorize_double copies the values)
     llt_ = std::make_unique<CholmodLLT>();
     llt_->setMode(Eigen::CholmodAuto);
     llt_->cholmod().print = 0;  // the library never prints

@@ -73,9 +73,9 @@ class SparseSystem : public HessianSink {
   }
   /// Factorizations made in float, and float factorizations that broke down (then made in double).
   int float_factorizations() const { return float_factorizations_; }
+  int float_breakdowns() const { return float_breakdowns_; }
   /// Tests: the float factor's two-thread threshold (FloatFactor::set_parallel_entries).
   void set_float_parallel_entries(size_t n) { float_factor_.set_parallel_entries(n); }
-  int float_breakdowns() const { return float_breakdowns_; }
   /// Preconditioned CG iterations spent by solve_pair on the float factor of the current values.
   int refinement_iterations() const { return refinement_iterations_; }
   /// Cost model of the last factorization, from CHOLMOD's symbolic analysis (deterministic, unlike
@@ -160,9 +160,9 @@ class SparseSystem : public HessianSink {
   bool float_wanted_ = false, float_only_ = false;  // float_only_: no double factor of the current values
   int float_factorizations_ = 0, float_breakdowns_ = 0;
   double float_shift_ = 0;
-  mutable int refinement_iterations_ = 0;
+  int refinement_iterations_ = 0;
   bool factorize_double();
-  FloatFactor float_factor_;  // single-precision copy of llt_'s factor (empty if not supernodal)
+  FloatFactor float_factor_;  // llt_'s factor copied to float, or the float factorization (empty if not supernodal)
 };
 
 }  // namespace polycube::deform
