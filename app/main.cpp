@@ -217,8 +217,9 @@ int main(int argc, char** argv) {
                "Polycube deformation: leave the area constraint's curvature out of the SQP Hessian (slower "
                "convergence; for comparison)");
   app.add_flag("--float-factorization", d.float_factorization,
-               "Polycube deformation (volume and surface mode, where the factor is supernodal): factorize the SQP systems in single precision and refine the solves by CG "
-               "(about twice as fast per factorization; it changes the SQP path, hence the polycube extraction's)");
+               "Polycube deformation (volume and surface mode, where the factor is supernodal): factorize the SQP "
+               "systems in single precision and refine the solves by CG (about twice as fast per factorization; it "
+               "changes the SQP path, hence the polycube extraction's)");
   app.add_option("--alpha-steps", d.max_alpha_steps, "Polycube deformation: schedule steps (alpha doublings) at most")
       ->capture_default_str()->check(CLI::Range(1, 100));
   app.add_option("--sqp-tolerance", d.sqp_tolerance,
