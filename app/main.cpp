@@ -413,6 +413,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 100000000));
   app.add_option("--quad-smooth", opt.quad.smooth_iterations, "Quad mesh: smoothing sweeps on the surface (0 = off)")
       ->capture_default_str()->check(CLI::Range(0, 10000));
+  app.add_option("--quad-shape-sweeps", opt.quad.shape_sweeps,
+                 "Quad mesh: sweeps of the shape pass around quads with an edge ratio over 10 (their free vertices "
+                 "move on the surface to lower their corners' squared condition numbers, which see the thin "
+                 "rectangles the scaled Jacobian takes for perfect); 0 = off")
+      ->capture_default_str()->check(CLI::Range(0, 10000));
   app.add_option("--sharp-angle", hx.sharp_angle_deg,
                  "Hex and quad meshes: dihedral angle (degrees) above which an input edge is a sharp feature that "
                  "boundary vertices keep to and slide along")

@@ -346,14 +346,18 @@ TEST(Cli, FeatureAnglesAndSqpToleranceReachTheRun) {
   EXPECT_DOUBLE_EQ(j["quad"]["options"]["sharp_angle_deg"].get<double>(), 30.0);
   EXPECT_DOUBLE_EQ(j["quad"]["options"]["max_edge_ratio"].get<double>(), 10.0);
   EXPECT_TRUE(j["quad"]["options"]["widen_slivers"].get<bool>());
+  EXPECT_EQ(j["quad"]["options"]["shape_sweeps"].get<int>(), 40);
   EXPECT_GT(j["quad"]["feature_vertices"].get<int>(), 0);
   EXPECT_DOUBLE_EQ(j["polycube"]["options"]["sqp_tolerance"].get<double>(), 0.0);  // surface default
-  r = run_cli("--example box_hole --surface --quad --quads 300 --sharp-angle 100 --crease-angle 120 -q -o " + out);
+  r = run_cli("--example box_hole --surface --quad --quads 300 --sharp-angle 100 --crease-angle 120 "
+              "--quad-shape-sweeps 0 -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;
   j = report(out);
   EXPECT_DOUBLE_EQ(j["quad"]["options"]["sharp_angle_deg"].get<double>(), 100.0);
   EXPECT_DOUBLE_EQ(j["quad"]["options"]["crease_angle_deg"].get<double>(), 120.0);
   EXPECT_EQ(j["quad"]["feature_vertices"].get<int>(), 0);
+  EXPECT_EQ(j["quad"]["options"]["shape_sweeps"].get<int>(), 0);
+  EXPECT_EQ(j["quad"]["shape_moves"].get<int>(), 0);
   // The SQP convergence test: on by default for volumes, fewer iterations than the error test alone.
   r = run_cli("--example sphere --until deform -q -o " + out);
   ASSERT_EQ(r.code, 0) << r.output;

@@ -568,6 +568,7 @@ TEST(Quad, SliverColumnIsWidened) {
       for (int j = 0; j < ny; ++j) pinned[i * ny + j] = i == 0 || j == 0 || i == nx - 1 || j == ny - 1;
     quad::QuadOptions o;
     o.widen_slivers = widen;
+    o.shape_sweeps = 0;  // (the shape pass widens the column too: see ShapePassWidensASliverColumn)
     quad::smooth_on_surface(r, s, o, {}, pinned);
     return r;
   };
@@ -585,4 +586,76 @@ TEST(Quad, SliverColumnIsWidened) {
     EXPECT_GT(shortest, 0.01) << "quad " << q;
   }
   for (int v = 0; v < on.V.rows(); ++v) EXPECT_NEAR(on.V(v, 2), 0.0, 1e-12);
+}
+
+namespace {
+// A flat 1 x 1 square meshed by a grid of quads with columns at xs and rows at ys, its boundary
+// vertices pinned (pinned[v]).
+quad::QuadResult flat_grid(const std::vector<double>& xs, const std::vector<double>& ys, std::vector<char>& pinned) {
+  const int nx = static_cast<int>(xs.size()), ny = static_cast<int>(ys.size());
+  quad::QuadResult r;
+  r.V.resize(nx * ny, 3);
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) r.V.row(i * ny + j) << xs[i], ys[j], 0;
+  r.Q.resize((nx - 1) * (ny - 1), 4);
+  for (int i = 0, q = 0; i + 1 < nx; ++i)
+    for (int j = 0; j + 1 < ny; ++j) {
+      const int a = i * ny + j;
+      r.Q.row(q++) << a, a + ny, a + ny + 1, a + 1;
+    }
+  pinned.assign(r.V.rows(), 0);
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j) pinned[i * ny + j] = i == 0 || j == 0 || i == nx - 1 || j == ny - 1;
+  return r;
+}
+
+double shortest_edge(const quad::QuadResult& r, int q) {
+  double shortest = 1e300;
+  for (int j = 0; j < 4; ++j) shortest = std::min(shortest, (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm());
+  return shortest;
+}
+}  // namespace
+
+TEST(Quad, ShapePassWidensASliverColumn) {
+  // The column of SliverColumnIsWidened (1e-4 wide, edge ratios 2500), without the smoothing's
+  // widening: the shape pass (QuadOptions::shape_sweeps) lowers the corner condition numbers of
+  // its quads, (a + 1/a) / 2 for a rectangle of aspect a, so its free vertices spread the column
+  // towards the even spacing of 0.2 that the pinned boundary leaves (the end quads keep their
+  // short edge on it).
+  const SurfaceMesh s = height_field(10, [](double, double) { return 0.0; });
+  const std::vector<double> xs{0, 0.2, 0.4, 0.4001, 0.6, 0.8, 1.0}, ys{0, 0.25, 0.5, 0.75, 1.0};
+  const int ny = static_cast<int>(ys.size());
+  auto run = [&](int sweeps) {
+    std::vector<char> pinned;
+    quad::QuadResult r = flat_grid(xs, ys, pinned);
+    quad::QuadOptions o;
+    o.widen_slivers = false;
+    o.shape_sweeps = sweeps;
+    quad::smooth_on_surface(r, s, o, {}, pinned);
+    return r;
+  };
+  const quad::QuadResult off = run(0), on = run(40);
+  EXPECT_EQ(off.shape_moves, 0);
+  EXPECT_EQ(off.quality.edge_ratio_above_100, 4);
+  EXPECT_GT(on.shape_moves, 0);
+  EXPECT_EQ(on.quality.edge_ratio_above_100, 2);  // the end quads, on the pinned boundary
+  EXPECT_EQ(on.quality.inverted, 0);
+  EXPECT_GE(on.quality.sj_min, 0.5);
+  // The middle quads of the column are now at least 0.05 wide (a quarter of the even spacing).
+  for (int q : {2 * (ny - 1) + 1, 2 * (ny - 1) + 2}) EXPECT_GT(shortest_edge(on, q), 0.05) << "quad " << q;
+  for (int v = 0; v < on.V.rows(); ++v) EXPECT_NEAR(on.V(v, 2), 0.0, 1e-12);
+}
+
+TEST(Quad, ShapePassLeavesGoodQuadsAlone) {
+  // An even 5 x 5 grid has no quad over the edge ratio of QuadOptions::max_edge_ratio: the shape
+  // pass moves nothing, and every quad stays a square.
+  const SurfaceMesh s = height_field(10, [](double, double) { return 0.0; });
+  const std::vector<double> even{0, 0.2, 0.4, 0.6, 0.8, 1.0};
+  std::vector<char> pinned;
+  quad::QuadResult r = flat_grid(even, even, pinned);
+  const MatX3d before = r.V;
+  quad::smooth_on_surface(r, s, {}, {}, pinned);
+  EXPECT_EQ(r.shape_moves, 0);
+  EXPECT_LT((r.V - before).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_GT(r.quality.sj_min, 1 - 1e-9);
 }

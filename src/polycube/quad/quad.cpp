@@ -33,6 +33,8 @@ constexpr double kSliverRatio = 100;
 /// A path of quad edges moved onto a crease is moved back when a quad around it stays below this
 /// (or below the worst quad without any capture, if lower).
 constexpr double kCaptureMinQuality = 0.3;
+/// The shape pass (QuadOptions::shape_sweeps): the weight of the size term of a corner's energy.
+constexpr double kShapeSize = 0.25;
 }  // namespace
 
 double scaled_jacobian(const std::array<Vec3, 4>& p) {
@@ -315,8 +317,159 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
       if (moves == 0) break;
     }
   };
-  // The last passes: poor quads' feature vertices, pattern search, fitting to the surface.
+  // Knupp's condition number of corner j of quad q, its normal taken as nrm: (|e1|^2 + |e2|^2) /
+  // (2 (e1 x e2) . nrm), infinite where the corner is flat or folded.
+  // The energy of a corner: its condition number squared (the square weighs the worst corners
+  // most: summed plain, one quad can grow as thin as another gets square), plus kShapeSize x
+  // (s + 1/s) / 2 of its area s relative to a square of the mean edge (else the corners next
+  // to a short edge that cannot move, on a sharp edge or a border, shrink their quads to squares
+  // of that edge).
+  const double corner_area = elen * elen;
+  auto corner_energy = [&](int q, int j, const Vec3& nrm) {
+    const Vec3 p = r.V.row(r.Q(q, j)).transpose();
+    const Vec3 e1 = r.V.row(r.Q(q, (j + 1) % 4)).transpose() - p;
+    const Vec3 e2 = r.V.row(r.Q(q, (j + 3) % 4)).transpose() - p;
+    const double det = e1.cross(e2).dot(nrm);
+    if (!(det > 0)) return std::numeric_limits<double>::infinity();
+    const double k = (e1.squaredNorm() + e2.squaredNorm()) / (2 * det), s = det / corner_area;
+    return k * k + kShapeSize * 0.5 * (s + 1 / s);
+  };
+  // Quads the shape pass leaves out of the energy (hopeless: a short edge whose two ends cannot
+  // move), only kept from folding.
+  std::vector<char> hopeless;
+  auto shape_energy = [&](int v, const Vec3& nrm) {
+    double e = 0;
+    for (int q : vq[v])
+      for (int j = 0; j < 4; ++j) {
+        const double c = corner_energy(q, j, nrm);
+        e += hopeless[q] && std::isfinite(c) ? 0.0 : c;
+      }
+    return e;
+  };
+  // The shape pass (QuadOptions::shape_sweeps): around the slivers, free vertices move along the
+  // surface down the sum of their quads' corner condition numbers (a numerical gradient in the
+  // tangent plane, then backtracking from a quarter of the mean edge around the vertex).
+  auto shape_pass = [&]() {
+    r.shape_moves = 0;
+    if (opt.shape_sweeps <= 0 || opt.max_edge_ratio <= 0) return;
+    std::vector<char> active(n, 0);
+    hopeless.assign(r.Q.rows(), 0);
+    auto immobile = [&](int v) {
+      int a, b;
+      return (!pinned.empty() && pinned[v]) || (fixed[v] && !slide_ends(v, a, b));
+    };
+    for (int q = 0; q < r.Q.rows(); ++q) {
+      double len[4];
+      for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+      if (hex::edge_ratio(len, 4) <= opt.max_edge_ratio) continue;
+      const double longest = *std::max_element(len, len + 4);
+      for (int j = 0; j < 4; ++j) {
+        active[r.Q(q, j)] = 1;
+        hopeless[q] = hopeless[q] || (len[j] * opt.max_edge_ratio < longest && immobile(r.Q(q, j)) &&
+                                      immobile(r.Q(q, (j + 1) % 4)));
+      }
+    }
+    for (int ring = 0; ring < opt.shape_rings; ++ring) {
+      std::vector<char> grown = active;
+      for (int v = 0; v < n; ++v)
+        if (active[v])
+          for (int u : nb[v]) grown[u] = 1;
+      active.swap(grown);
+    }
+    std::vector<int> order;
+    for (int v = 0; v < n; ++v)
+      if (active[v] && !nb[v].empty() && (pinned.empty() || !pinned[v])) order.push_back(v);
+    if (order.empty()) return;
+    for (int sweep = 0; sweep < opt.shape_sweeps; ++sweep) {
+      int moves = 0;
+      for (int v : order) {
+        Vec3 nrm = quads_normal(v);
+        if (!(nrm.norm() > 0)) continue;
+        nrm.normalize();
+        const Vec3 x = r.V.row(v).transpose();
+        const double e0 = shape_energy(v, nrm);
+        if (!std::isfinite(e0)) continue;  // a folded corner: the smoothing's and search's business
+        const double before = worst(v);
+        if (fixed[v]) {
+          // A feature vertex slides along its sharp edge, as in the smoothing, to the position of
+          // the lowest energy among a few towards its two neighbours on the edge, its two quad edges
+          // along the sharp edge cutting it no more than before (or 0.05 x the mean edge).
+          int a, b;
+          if (before <= kFreeFeatureBelow || !slide_ends(v, a, b)) continue;
+          const Vec3 ab = (r.V.row(b) - r.V.row(a)).transpose();
+          auto chord_gap = [&](const Vec3& p) {
+            double g = 0;
+            for (int u : {a, b}) {
+              const Vec3 mid = 0.5 * (p + r.V.row(u).transpose());
+              Vec3 c;
+              g = std::max(g, geometry::closest_on_sharp_edge(target, sharp, adj, tree, mid, 0.5 * elen, c)
+                                  ? (c - mid).norm()
+                                  : 0.5 * elen);
+            }
+            return g;
+          };
+          const double gap_limit = std::max(chord_gap(x), 0.05 * elen);
+          Vec3 best_p = x;
+          double best_e = e0 * (1 - 1e-6);
+          for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
+            Vec3 p;
+            if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
+            if (chord_gap(p) > gap_limit) continue;
+            r.V.row(v) = p.transpose();
+            const double e1 = shape_energy(v, nrm);
+            if (e1 < best_e && worst(v) >= std::min(before, kSliverFloor)) best_e = e1, best_p = p;
+          }
+          r.V.row(v) = best_p.transpose();
+          moves += best_p != x;
+          continue;
+        }
+        double h = 0;
+        for (int u : nb[v]) h += (r.V.row(u).transpose() - x).norm();
+        h /= static_cast<double>(nb[v].size());
+        const Vec3 t1 = nrm.unitOrthogonal(), t2 = nrm.cross(t1);
+        const double fd = 1e-4 * h;
+        Vec3 grad = Vec3::Zero();
+        bool finite = true;
+        for (const Vec3& t : {t1, t2}) {
+          r.V.row(v) = (x + fd * t).transpose();
+          const double ep = shape_energy(v, nrm);
+          r.V.row(v) = (x - fd * t).transpose();
+          const double em = shape_energy(v, nrm);
+          finite = finite && std::isfinite(ep) && std::isfinite(em);
+          grad += (ep - em) / (2 * fd) * t;
+        }
+        r.V.row(v) = x.transpose();
+        if (!finite || !(grad.norm() > 0)) continue;
+        const Vec3 dir = -grad.normalized();
+        bool moved = false;
+        for (double step = 0.25 * h; step > 1e-3 * h && !moved; step *= 0.5) {
+          const Vec3 p = onto_surface(v, x + step * dir, nrm, false);
+          r.V.row(v) = p.transpose();
+          const double e1 = shape_energy(v, nrm);
+          if (e1 < e0 * (1 - 1e-6) && worst(v) >= std::min(before, kSliverFloor)) {
+            moved = true;
+          } else {
+            r.V.row(v) = x.transpose();
+          }
+        }
+        moves += moved;
+      }
+      r.shape_moves += moves;
+      if (moves == 0) break;
+    }
+  };
+  // The last passes: the shape pass around slivers, poor quads' feature vertices, pattern search,
+  // fitting to the surface.
   auto finish = [&]() {
+    const QuadQuality before_shape = quad_quality(r.V, r.Q);
+    shape_pass();
+    {
+      const QuadQuality after_shape = quad_quality(r.V, r.Q);
+      hooks.debug("shape pass: " + std::to_string(r.shape_moves) + " moves; worst quad " +
+                  std::to_string(before_shape.sj_min) + " -> " + std::to_string(after_shape.sj_min) +
+                  ", largest edge ratio " + std::to_string(before_shape.edge_ratio_max) + " -> " +
+                  std::to_string(after_shape.edge_ratio_max));
+    }
     // Last, the poor quads' feature vertices may slide further (longer chords along curved sharp
     // edges); in the smoothing the extracted mesh's many poor quads would all take them (mambo_B2:
     // Hausdorff 1.55e-3 -> 1.76e-3).
