@@ -55,7 +55,9 @@ struct QuadOptions {
   /// square of the mean edge's. Squared, so that no quad grows thinner for another to get square;
   /// with the size term, so that quads next to a short edge that cannot move do not shrink to
   /// squares of it; and quads with such an edge (both ends pinned, or on a sharp edge without
-  /// room to slide) are left out of the sum, only kept from folding. A move may not take the
+  /// room to slide) are left out of the sum, only kept from folding. Feature vertices of quads
+  /// over edge ratio 100 that lie on no crease (capture_angle_deg: facets of a coarse smooth
+  /// surface) move like free ones. A move may not take the
   /// worst quad around the vertex below 0.5 (or where it was, if lower). At most shape_sweeps
   /// sweeps (0 = off). polycube_bench --quad-table (surface mode, 2000 quads; edge ratio max /
   /// quads over 10, scaled Jacobian min / mean, Hausdorff 1e-3): bumpy torus 361 / 1266, 0.342 /
