@@ -542,52 +542,6 @@ TEST(Quad, TheTargetsUnusedVerticesAreNotTakenForSurfacePoints) {
   EXPECT_EQ(a.quality.inverted, 0);
 }
 
-TEST(Quad, SliverColumnIsWidened) {
-  // A flat 1 x 1 square meshed by quads in 6 columns and 4 rows, one column 1e-4 wide (as a thin
-  // step kept a cell wide gives): its 4 quads have edge ratios of 2500. The boundary is pinned,
-  // so the two end quads keep a short edge on it; the two middle ones have both short edges
-  // free, and no single corner move lowers their edge ratio (the other short edge stays), nor
-  // raises any scaled Jacobian (they are rectangles). With QuadOptions::widen_slivers the
-  // smoothing takes the moves that lower their aspect instead: the middle ones widen.
-  const SurfaceMesh s = height_field(10, [](double, double) { return 0.0; });
-  const std::vector<double> xs{0, 0.2, 0.4, 0.4001, 0.6, 0.8, 1.0}, ys{0, 0.25, 0.5, 0.75, 1.0};
-  const int nx = static_cast<int>(xs.size()), ny = static_cast<int>(ys.size());
-  auto run = [&](bool widen) {
-    quad::QuadResult r;
-    r.V.resize(nx * ny, 3);
-    for (int i = 0; i < nx; ++i)
-      for (int j = 0; j < ny; ++j) r.V.row(i * ny + j) << xs[i], ys[j], 0;
-    r.Q.resize((nx - 1) * (ny - 1), 4);
-    for (int i = 0, q = 0; i + 1 < nx; ++i)
-      for (int j = 0; j + 1 < ny; ++j) {
-        const int a = i * ny + j;
-        r.Q.row(q++) << a, a + ny, a + ny + 1, a + 1;
-      }
-    std::vector<char> pinned(r.V.rows(), 0);
-    for (int i = 0; i < nx; ++i)
-      for (int j = 0; j < ny; ++j) pinned[i * ny + j] = i == 0 || j == 0 || i == nx - 1 || j == ny - 1;
-    quad::QuadOptions o;
-    o.widen_slivers = widen;
-    o.shape_sweeps = 0;  // (the shape pass widens the column too: see ShapePassWidensASliverColumn)
-    quad::smooth_on_surface(r, s, o, {}, pinned);
-    return r;
-  };
-  const quad::QuadResult off = run(false), on = run(true);
-  EXPECT_EQ(off.extracted.edge_ratio_above_100, 4);
-  EXPECT_EQ(off.quality.edge_ratio_above_100, 4);
-  EXPECT_EQ(on.quality.edge_ratio_above_100, 2);  // the end quads, on the pinned boundary
-  EXPECT_EQ(on.quality.inverted, 0);
-  EXPECT_GE(on.quality.sj_min, 0.5);
-  // The middle quads of the column (rows 1 and 2 of column 2) are now at least 0.01 wide.
-  for (int q : {2 * (ny - 1) + 1, 2 * (ny - 1) + 2}) {
-    double shortest = 1e300;
-    for (int j = 0; j < 4; ++j)
-      shortest = std::min(shortest, (on.V.row(on.Q(q, j)) - on.V.row(on.Q(q, (j + 1) % 4))).norm());
-    EXPECT_GT(shortest, 0.01) << "quad " << q;
-  }
-  for (int v = 0; v < on.V.rows(); ++v) EXPECT_NEAR(on.V(v, 2), 0.0, 1e-12);
-}
-
 namespace {
 // A flat 1 x 1 square meshed by a grid of quads with columns at xs and rows at ys, its boundary
 // vertices pinned (pinned[v]).
@@ -615,6 +569,37 @@ double shortest_edge(const quad::QuadResult& r, int q) {
   return shortest;
 }
 }  // namespace
+
+TEST(Quad, SliverColumnIsWidened) {
+  // A flat 1 x 1 square meshed by quads in 6 columns and 4 rows, one column 1e-4 wide (as a thin
+  // step kept a cell wide gives): its 4 quads have edge ratios of 2500. The boundary is pinned,
+  // so the two end quads keep a short edge on it; the two middle ones have both short edges
+  // free, and no single corner move lowers their edge ratio (the other short edge stays), nor
+  // raises any scaled Jacobian (they are rectangles). With QuadOptions::widen_slivers the
+  // smoothing takes the moves that lower their aspect instead: the middle ones widen.
+  const SurfaceMesh s = height_field(10, [](double, double) { return 0.0; });
+  const std::vector<double> xs{0, 0.2, 0.4, 0.4001, 0.6, 0.8, 1.0}, ys{0, 0.25, 0.5, 0.75, 1.0};
+  const int ny = static_cast<int>(ys.size());
+  auto run = [&](bool widen) {
+    std::vector<char> pinned;
+    quad::QuadResult r = flat_grid(xs, ys, pinned);
+    quad::QuadOptions o;
+    o.widen_slivers = widen;
+    o.shape_sweeps = 0;  // (the shape pass widens the column too: see ShapePassWidensASliverColumn)
+    quad::smooth_on_surface(r, s, o, {}, pinned);
+    return r;
+  };
+  const quad::QuadResult off = run(false), on = run(true);
+  EXPECT_EQ(off.extracted.edge_ratio_above_100, 4);
+  EXPECT_EQ(off.quality.edge_ratio_above_100, 4);
+  EXPECT_EQ(on.quality.edge_ratio_above_100, 2);  // the end quads, on the pinned boundary
+  EXPECT_EQ(on.quality.inverted, 0);
+  EXPECT_GE(on.quality.sj_min, 0.5);
+  // The middle quads of the column (rows 1 and 2 of column 2) are now at least 0.01 wide.
+  for (int q : {2 * (ny - 1) + 1, 2 * (ny - 1) + 2}) EXPECT_GT(shortest_edge(on, q), 0.01) << "quad " << q;
+  for (int v = 0; v < on.V.rows(); ++v) EXPECT_NEAR(on.V(v, 2), 0.0, 1e-12);
+}
+
 
 TEST(Quad, ShapePassWidensASliverColumn) {
   // The column of SliverColumnIsWidened (1e-4 wide, edge ratios 2500), without the smoothing's

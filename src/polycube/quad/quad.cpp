@@ -213,6 +213,18 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return count == 2;
   };
+  // How far the quad edges from p to a and to b (v's neighbours on its sharp edge) cut the sharp
+  // edge: the larger distance from their midpoints to it (0.5 x the mean edge if none is near).
+  auto chord_gap_between = [&](int a, int b, const Vec3& p) {
+    double g = 0;
+    for (int u : {a, b}) {
+      const Vec3 mid = 0.5 * (p + r.V.row(u).transpose());
+      Vec3 q;
+      g = std::max(g, geometry::closest_on_sharp_edge(target, sharp, adj, tree, mid, 0.5 * elen, q) ? (q - mid).norm()
+                                                                                                  : 0.5 * elen);
+    }
+    return g;
+  };
   bool poor_only = false;  // the last pass: only feature vertices of quads below kPoorQuad slide
   // The sum of the (doubled) area normals of v's quads, and a point of the surface near y for v:
   // on v's smooth patch unless `cross` (the vertex of a poor quad may leave it).
@@ -247,17 +259,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           // The best of a few positions along the edge (towards either neighbour), projected on it.
           // The two quad edges must not cut the sharp edge more than before (curved sharp edges).
           const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
-          auto chord_gap = [&](const Vec3& p) {
-            double g = 0;
-            for (int u : {a, b}) {
-              const Vec3 mid = 0.5 * (p + r.V.row(u).transpose());
-              Vec3 q;
-              g = std::max(g, geometry::closest_on_sharp_edge(target, sharp, adj, tree, mid, 0.5 * elen, q)
-                                  ? (q - mid).norm()
-                                  : 0.5 * elen);
-            }
-            return g;
-          };
+          auto chord_gap = [&](const Vec3& p) { return chord_gap_between(a, b, p); };
           // In the last pass (quads below kPoorQuad) the chords may cut the edge up to
           // kPoorQuadChordGap x elen: fandisk's worst quad has three corners on a curved sharp edge,
           // its angle at the middle one 180 degrees less the edge's turn between the other two,
@@ -413,17 +415,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           int a, b;
           if (before <= kFreeFeatureBelow || !slide_ends(v, a, b)) continue;
           const Vec3 ab = (r.V.row(b) - r.V.row(a)).transpose();
-          auto chord_gap = [&](const Vec3& p) {
-            double g = 0;
-            for (int u : {a, b}) {
-              const Vec3 mid = 0.5 * (p + r.V.row(u).transpose());
-              Vec3 c;
-              g = std::max(g, geometry::closest_on_sharp_edge(target, sharp, adj, tree, mid, 0.5 * elen, c)
-                                  ? (c - mid).norm()
-                                  : 0.5 * elen);
-            }
-            return g;
-          };
+          auto chord_gap = [&](const Vec3& p) { return chord_gap_between(a, b, p); };
           const double gap_limit = std::max(chord_gap(x), 0.05 * elen);
           Vec3 best_p = x;
           double best_e = e0 * (1 - 1e-6);
