@@ -151,11 +151,15 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     return m;
   };
   // The largest edge ratio of v's quads.
+  // The lengths of quad q's edges, edge j from corner j to corner j + 1.
+  auto edge_lengths = [&](int q, double* len) {
+    for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+  };
   auto ratio = [&](int v) {
     double m = 0;
     for (int q : vq[v]) {
       double len[4];
-      for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+      edge_lengths(q, len);
       m = std::max(m, hex::edge_ratio(len, 4));
     }
     return m;
@@ -225,6 +229,19 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     }
     return g;
   };
+  // Puts v at each of a few positions along its sharp edge towards its neighbours a and b on it
+  // (projected on the edge) whose quad edges to a and b cut it by at most gap_limit, and calls
+  // visit(p) there; v is left at the last one (callers put it where they choose).
+  auto try_slides = [&](int v, int a, int b, double gap_limit, const auto& visit) {
+    const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
+    for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
+      Vec3 p;
+      if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
+      if (chord_gap_between(a, b, p) > gap_limit) continue;
+      r.V.row(v) = p.transpose();
+      visit(p);
+    }
+  };
   bool poor_only = false;  // the last pass: only feature vertices of quads below kPoorQuad slide
   // The sum of the (doubled) area normals of v's quads, and a point of the surface near y for v:
   // on v's smooth patch unless `cross` (the vertex of a poor quad may leave it).
@@ -258,7 +275,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           if ((before >= opt.slide_below && !sliver) || !slide_ends(v, a, b)) continue;
           // The best of a few positions along the edge (towards either neighbour), projected on it.
           // The two quad edges must not cut the sharp edge more than before (curved sharp edges).
-          const Vec3 x = r.V.row(v).transpose(), ab = (r.V.row(b) - r.V.row(a)).transpose();
+          const Vec3 x = r.V.row(v).transpose();
           auto chord_gap = [&](const Vec3& p) { return chord_gap_between(a, b, p); };
           // In the last pass (quads below kPoorQuad) the chords may cut the edge up to
           // kPoorQuadChordGap x elen: fandisk's worst quad has three corners on a curved sharp edge,
@@ -267,11 +284,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           const double gap_limit = std::max(chord_gap(x), (poor_only ? kPoorQuadChordGap : 0.05) * elen);
           Vec3 best_p = x;
           double best_q = before, best_ratio = ratio_before;
-          for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
-            Vec3 p;
-            if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
-            if (chord_gap(p) > gap_limit) continue;
-            r.V.row(v) = p.transpose();
+          try_slides(v, a, b, gap_limit, [&](const Vec3& p) {
             const double q = worst(v);
             if (sliver) {
               const double rr = ratio(v);
@@ -280,7 +293,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
               best_q = q;
               best_p = p;
             }
-          }
+          });
           r.V.row(v) = best_p.transpose();
           moves += best_p != x;
           continue;
@@ -319,10 +332,10 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
       if (moves == 0) break;
     }
   };
-  // Knupp's condition number of corner j of quad q, its normal taken as nrm: (|e1|^2 + |e2|^2) /
-  // (2 (e1 x e2) . nrm), infinite where the corner is flat or folded.
-  // The energy of a corner: its condition number squared (the square weighs the worst corners
-  // most: summed plain, one quad can grow as thin as another gets square), plus kShapeSize x
+  // The energy of corner j of quad q, its normal taken as nrm: Knupp's condition number
+  // (|e1|^2 + |e2|^2) / (2 (e1 x e2) . nrm) squared, infinite where the corner is flat or folded
+  // (the square weighs the worst corners most: summed plain, one quad can grow as thin as another
+  // gets square), plus kShapeSize x
   // (s + 1/s) / 2 of its area s relative to a square of the mean edge (else the corners next
   // to a short edge that cannot move, on a sharp edge or a border, shrink their quads to squares
   // of that edge).
@@ -349,8 +362,8 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     return e;
   };
   // The shape pass (QuadOptions::shape_sweeps): around the slivers, free vertices move along the
-  // surface down the sum of their quads' corner condition numbers (a numerical gradient in the
-  // tangent plane, then backtracking from a quarter of the mean edge around the vertex).
+  // surface down the sum of their quads' corner energies (a numerical gradient in the tangent
+  // plane, then backtracking from a quarter of the mean edge around the vertex).
   auto shape_pass = [&]() {
     r.shape_moves = 0;
     if (opt.shape_sweeps <= 0 || opt.max_edge_ratio <= 0) return;
@@ -363,7 +376,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     std::vector<char> released(n, 0);
     for (int q = 0; q < r.Q.rows(); ++q) {
       double len[4];
-      for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+      edge_lengths(q, len);
       if (hex::edge_ratio(len, 4) <= kSliverRatio) continue;
       for (int j = 0; j < 4; ++j) {
         const int v = r.Q(q, j);
@@ -378,7 +391,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
     };
     for (int q = 0; q < r.Q.rows(); ++q) {
       double len[4];
-      for (int j = 0; j < 4; ++j) len[j] = (r.V.row(r.Q(q, j)) - r.V.row(r.Q(q, (j + 1) % 4))).norm();
+      edge_lengths(q, len);
       if (hex::edge_ratio(len, 4) <= opt.max_edge_ratio) continue;
       const double longest = *std::max_element(len, len + 4);
       for (int j = 0; j < 4; ++j) {
@@ -414,19 +427,12 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
           // along the sharp edge cutting it no more than before (or 0.05 x the mean edge).
           int a, b;
           if (before <= kFreeFeatureBelow || !slide_ends(v, a, b)) continue;
-          const Vec3 ab = (r.V.row(b) - r.V.row(a)).transpose();
-          auto chord_gap = [&](const Vec3& p) { return chord_gap_between(a, b, p); };
-          const double gap_limit = std::max(chord_gap(x), 0.05 * elen);
           Vec3 best_p = x;
           double best_e = e0 * (1 - 1e-6);
-          for (double t : {-0.3, -0.2, -0.1, -0.05, 0.05, 0.1, 0.2, 0.3}) {
-            Vec3 p;
-            if (!geometry::closest_on_sharp_edge(target, sharp, adj, tree, x + t * ab, 0.5 * elen, p)) continue;
-            if (chord_gap(p) > gap_limit) continue;
-            r.V.row(v) = p.transpose();
+          try_slides(v, a, b, std::max(chord_gap_between(a, b, x), 0.05 * elen), [&](const Vec3& p) {
             const double e1 = shape_energy(v, nrm);
             if (e1 < best_e && worst(v) >= std::min(before, kSliverFloor)) best_e = e1, best_p = p;
-          }
+          });
           r.V.row(v) = best_p.transpose();
           moves += best_p != x;
           continue;
@@ -472,6 +478,7 @@ void smooth_on_surface(QuadResult& r, const SurfaceMesh& target_in, const QuadOp
   auto finish = [&]() {
     // -v: the worst quad and the largest edge ratio after each pass.
     auto log_pass = [&](const std::string& pass, int moves) {
+      if (!hooks.log) return;
       const QuadQuality q = quad_quality(r.V, r.Q);
       hooks.debug(pass + ": " + std::to_string(moves) + " moves; worst quad " + std::to_string(q.sj_min) +
                   ", largest edge ratio " + std::to_string(q.edge_ratio_max));

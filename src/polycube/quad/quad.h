@@ -57,13 +57,13 @@ struct QuadOptions {
   /// squares of it; and quads with such an edge (both ends pinned, or on a sharp edge without
   /// room to slide) are left out of the sum, only kept from folding. Feature vertices of quads
   /// over edge ratio 100 that lie on no crease (capture_angle_deg: facets of a coarse smooth
-  /// surface) move like free ones. A move may not take the
-  /// worst quad around the vertex below 0.5 (or where it was, if lower). At most shape_sweeps
-  /// sweeps (0 = off). polycube_bench --quad-table (surface mode, 2000 quads; edge ratio max /
-  /// quads over 10, scaled Jacobian min / mean, Hausdorff 1e-3): bumpy torus 361 / 1266, 0.342 /
-  /// 0.793, 30.4 -> 117 / 59, 0.309 / 0.906, 8.5; homer 219 / 134 -> 99.9 / 71 (0.278 / 0.903 ->
-  /// 0.234 / 0.892: its thin-step retry no longer kept); cow 151 / 45 -> 122 / 42; blub 29.9 / 4
-  /// -> 14.4 / 3; spot 68.6 / 24 -> 68.6 / 15; fandisk unchanged, rocker 11 / 7 -> 10.5 / 1.
+  /// surface) move like free ones. A move may not take the worst quad around the vertex below
+  /// 0.5 (or where it was, if lower). At most shape_sweeps sweeps (0 = off). polycube_bench
+  /// --quad-table (surface mode, 2000 quads; edge ratio max / quads over 10, scaled Jacobian min /
+  /// mean, Hausdorff 1e-3), with the pattern search's sliver guard: bumpy torus 361 / 1266, 0.342 /
+  /// 0.793, 30.4 -> 107 / 46, 0.301 / 0.907, 7.5; homer 219 / 134 -> 69.7 / 71 (0.278 / 0.903 ->
+  /// 0.234 / 0.892: its thin-step retry no longer kept); cow 151 / 45 -> 91 / 57; blub 29.9 / 4
+  /// -> 14.4 / 3; spot 68.6 / 24 -> 68.6 / 12; fandisk unchanged, rocker 11 / 7 -> 10.5 / 1.
   int shape_sweeps = 40;
   int shape_rings = 2;
   /// Surface mode: consecutive chart planes of an axis less than this many cells apart that do
