@@ -398,6 +398,22 @@ TEST(SurfaceQuads, BetterQuadsAreCloserToTheSurfaceAtASimilarQuality) {
   EXPECT_TRUE(quad::better_quads(b, 0.1, a, 1.0));
 }
 
+TEST(SurfaceQuads, FewerSliverQuadsWinUnlessFarFromTheSurface) {
+  quad::QuadQuality a;
+  a.sj_min = 0.30;
+  a.sj_mean = 0.95;
+  quad::QuadQuality b = a;
+  b.edge_ratio_above_100 = 1;  // one quad over edge ratio 100
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 0.9)) << "a sliver is not worth 10% of the distance";
+  EXPECT_TRUE(quad::better_quads(b, 0.9, a, 1.0));
+  EXPECT_TRUE(quad::better_quads(b, 1.0, a, 1.4)) << "nor worth 40% more of it";
+  EXPECT_FALSE(quad::better_quads(b, 1.0, a, 2.0)) << "a mesh twice as far (a part lost) does not win by its slivers";
+  EXPECT_TRUE(quad::better_quads(a, 2.0, b, 1.0));
+  b.inverted = 1;  // folded quads still come first
+  a.edge_ratio_above_100 = 5;
+  EXPECT_FALSE(quad::better_quads(a, 1.0, b, 1.0));
+}
+
 // Two polycubes of one layout (ExtractOptions::repair_deformed_start keeps the other start's as
 // PolycubeExtraction::alternative): quads are extracted from both and the better kept, whichever of
 // the two the extraction itself kept.

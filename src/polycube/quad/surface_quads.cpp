@@ -267,6 +267,12 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
 
 bool better_quads(const QuadQuality& a, double ha, const QuadQuality& b, double hb) {
   if (a.inverted != b.inverted) return b.inverted < a.inverted;
+  // Slivers (edge ratio over hex::kSliverEdgeRatio, nearly degenerate): fewer win unless they are
+  // more than kSliverDistanceSlack x farther from the surface (a layout that lost a part).
+  constexpr double kSliverDistanceSlack = 1.5;
+  const int sa = a.edge_ratio_above_100, sb = b.edge_ratio_above_100;
+  if (sb < sa && hb <= kSliverDistanceSlack * ha) return true;
+  if (sa < sb && ha <= kSliverDistanceSlack * hb) return false;
   return hb < 0.98 * ha && b.sj_min >= 0.9 * a.sj_min && b.sj_mean >= a.sj_mean - 0.02;
 }
 
