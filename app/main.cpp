@@ -433,6 +433,12 @@ int main(int argc, char** argv) {
                "Surface mode, quads: when two realization starts both give a polycube, extract quads from both and "
                "keep the better (closer to the surface at a similar quality)")
       ->capture_default_str();
+  int threads = 0;
+  app.add_option("--threads", threads,
+                 "Cores to use, 1 or 2 (default: the machine's, at most 2, or the environment's POLYCUBE_THREADS). "
+                 "The two counts round differently, so results repeat bit for bit at one count; 1 is faster when "
+                 "other jobs share a 2-core machine (OpenBLAS's threads spin while waiting)")
+      ->check(CLI::Range(1, 2));
   app.add_flag("--vtk-binary", opt.vtk_binary, "Write VTK files in BINARY instead of ASCII");
   app.add_flag("-q,--quiet", quiet, "Only warnings and errors");
   app.add_flag("-v,--verbose", verbose, "Debug messages");
@@ -443,6 +449,7 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
 
+  if (threads > 0) set_thread_limit(threads);
   if (no_rotation) opt.deform.global_rotation = false;
   if (plain_hessian) opt.deform.lagrangian_hessian = false;
   opt.deform.rescue_from_step = rescue_step - 1;

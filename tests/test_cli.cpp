@@ -115,6 +115,21 @@ TEST(Cli, UntilLoadWritesNoTetMeshAndClearsOldResults) {
   EXPECT_FALSE(report(out).contains("tetmesh"));
 }
 
+// --threads 1: one core (the report says so), and the same bits on a second run; 3 is refused.
+TEST(Cli, OneThreadRepeatsItsResultsAndOtherCountsAreRefused) {
+  const std::string out = temp_dir("threads");
+  for (const char* run : {"a", "b"}) {
+    RunResult r = run_cli("--example sphere --until deform --threads 1 -q -o " + out + "/" + run);
+    ASSERT_EQ(r.code, 0) << r.output;
+    EXPECT_EQ(report(out + "/" + run)["tool"]["threads"], 1);
+  }
+  EXPECT_EQ(read_text(out + "/a/deformed.mesh"), read_text(out + "/b/deformed.mesh"));
+  EXPECT_EQ(report(out + "/a")["polycube"]["l1_quality"], report(out + "/b")["polycube"]["l1_quality"]);
+  RunResult bad = run_cli("--example sphere --until load --threads 3 -o " + out + "/c");
+  EXPECT_EQ(bad.code, 2) << bad.output;
+  EXPECT_NE(bad.output.find("--threads"), std::string::npos) << bad.output;
+}
+
 TEST(Cli, SurfaceFileKeepsScaleAndPosition) {
   auto s = sphere(3, Vec3(100, -20, 5), 7.5);
   std::string dir = temp_dir("scale");

@@ -46,6 +46,28 @@ TEST(Parallel, BlasKeepsOneThreadWhileARunPairRuns) {
   EXPECT_EQ(blas_threads(), hardware_threads());  // restored once the pair has ended
 }
 
+// set_thread_limit(1): one core for everything, run_pair's tasks one after the other on the
+// caller's thread and a one-thread BLAS; 0 lifts the limit again.
+TEST(Parallel, ThreadLimitOfOneRunsPairsOnOneThread) {
+  if (std::getenv("POLYCUBE_THREADS")) GTEST_SKIP() << "POLYCUBE_THREADS sets the count without a limit";
+  const int machine = hardware_threads();
+  set_thread_limit(1);
+  EXPECT_EQ(hardware_threads(), 1);
+  std::thread::id ids[2];
+  run_pair([&](int k) { ids[k] = std::this_thread::get_id(); });
+  EXPECT_EQ(ids[0], std::this_thread::get_id());
+  EXPECT_EQ(ids[1], std::this_thread::get_id());
+  if (blas_threads() >= 0) {
+    set_blas_threads(hardware_threads());
+    EXPECT_EQ(blas_threads(), 1);
+  }
+  set_thread_limit(5);  // above the machine's: the machine's
+  EXPECT_EQ(hardware_threads(), machine);
+  set_thread_limit(0);
+  EXPECT_EQ(hardware_threads(), machine);
+  if (blas_threads() >= 0) set_blas_threads(hardware_threads());
+}
+
 TEST(Parallel, BlasKernelsArePinnedOnAvx2Machines) {
   // The test binary's main calls reexec_with_portable_blas, as the CLI and the bench do.
   const std::string core = blas_core();

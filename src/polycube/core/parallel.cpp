@@ -11,7 +11,22 @@
 
 namespace polycube {
 
-int hardware_threads() { return static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency()))); }
+namespace {
+std::atomic<int> thread_limit{0};
+}  // namespace
+
+int hardware_threads() {
+  static const int machine = static_cast<int>(std::max(1u, std::min(2u, std::thread::hardware_concurrency())));
+  static const int from_environment = [] {
+    const char* e = std::getenv("POLYCUBE_THREADS");
+    return e ? std::atoi(e) : 0;
+  }();
+  const int set = thread_limit.load(std::memory_order_relaxed);
+  const int limit = set > 0 ? set : from_environment;
+  return limit >= 1 ? std::min(machine, limit) : machine;
+}
+
+void set_thread_limit(int n) { thread_limit.store(std::max(0, n), std::memory_order_relaxed); }
 
 std::string blas_core() {
   using GetName = char* (*)();

@@ -8,8 +8,19 @@
 
 namespace polycube {
 
-/// Cores used: 1 or 2 (more do not pay at our sizes: memory-bound solves, small dense kernels).
+/// Cores used: 1 or 2 (more do not pay at our sizes: memory-bound solves, small dense kernels):
+/// the machine's, at most 2, lowered by set_thread_limit or else by the environment variable
+/// POLYCUBE_THREADS (read at the first call).
 int hardware_threads();
+
+/// Limits the cores used to n (1 or 2; 0 lifts the limit, back to POLYCUBE_THREADS or the
+/// machine's). Set it before the work starts: the two counts round differently (OpenBLAS's
+/// factorizations), so a run is reproduced bit for bit only at the same count. One core pays where
+/// other jobs share the machine: OpenBLAS's threads spin while they wait for each other, and a
+/// busy second core slows them down several times (fandisk's deformation, 35.6k tets, on 2 cores:
+/// alone 7.2 s with two threads, 12.0 s with one; beside one busy process 20.0-20.3 s with two,
+/// 12.1-13.0 s with one, the numeric factorizations 10.2-10.4 s against 3.1-3.3 s).
+void set_thread_limit(int n);
 
 /// The kernels OpenBLAS runs, by its core name ("Haswell", "Zen", "SkylakeX", ...); empty when the
 /// loaded BLAS is not OpenBLAS.
