@@ -302,7 +302,13 @@ int main(int argc, char** argv) {
   app.add_flag("--quad-volume", quad_volume,
                "Instead: the organic shapes' quads through the volume (the CLI's --quad --quad-polycube surface, 2000 "
                "quads; outputs under --save DIR, else a temporary folder)");
+  int threads = 0;
+  app.add_option("--threads", threads, "Cores to use, 1 or 2 (the CLI's --threads; default the machine's, at most 2)")
+      ->check(CLI::Range(1, 2));
   CLI11_PARSE(app, argc, argv);
+  if (threads > 0) set_thread_limit(threads);
+  // What the timings and the bits depend on, above every table.
+  std::printf("threads %d, BLAS kernels %s\n", hardware_threads(), blas_core().empty() ? "(not OpenBLAS)" : blas_core().c_str());
   if (quad_table) return quad_bench(shared, only, quad_beta, sqp_tolerance);
   if (quad_volume) return quad_volume_bench(shared, only, save_dir);
   if (survey_all) return survey(shared, only, save_dir);
