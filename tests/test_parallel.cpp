@@ -58,9 +58,17 @@ TEST(Parallel, ThreadLimitOfOneRunsPairsOnOneThread) {
   EXPECT_EQ(ids[0], std::this_thread::get_id());
   EXPECT_EQ(ids[1], std::this_thread::get_id());
   if (blas_threads() >= 0) {
-    set_blas_threads(hardware_threads());
+    set_blas_threads(2);  // a factorization's request: capped at the limit
     EXPECT_EQ(blas_threads(), 1);
   }
+  // The one-thread run_pair keeps the contract: both tasks run, the exception comes after both.
+  std::atomic<int> finished{0};
+  EXPECT_THROW(run_pair([&](int k) {
+                 if (k == 0) throw std::runtime_error("task failed");
+                 ++finished;
+               }),
+               std::runtime_error);
+  EXPECT_EQ(finished.load(), 1);
   set_thread_limit(5);  // above the machine's: the machine's
   EXPECT_EQ(hardware_threads(), machine);
   set_thread_limit(0);

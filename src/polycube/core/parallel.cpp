@@ -63,7 +63,7 @@ void apply_blas_threads(int n) {
 
 void set_blas_threads(int n) {
   const std::lock_guard<std::mutex> lock(blas_mutex());
-  apply_blas_threads(pair_depth > 0 ? 1 : n);
+  apply_blas_threads(pair_depth > 0 ? 1 : std::min(n, hardware_threads()));
 }
 
 namespace detail {

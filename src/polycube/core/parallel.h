@@ -36,8 +36,8 @@ std::string blas_core();
 /// not execute the program again (environment set, no AVX2, or the exec failed).
 void reexec_with_portable_blas(char** argv);
 
-/// Sets OpenBLAS's thread count if the loaded BLAS is OpenBLAS (looked up at run time, so that
-/// any other BLAS works too); no effect otherwise. While a run_pair runs (in any thread), the count
+/// Sets OpenBLAS's thread count, at most hardware_threads(), if the loaded BLAS is OpenBLAS (looked
+/// up at run time, so that any other BLAS works too); no effect otherwise. While a run_pair runs (in any thread), the count
 /// stays 1 whatever n is: OpenBLAS rounds differently with one thread and with two (its dpotrf
 /// blocks otherwise), so a task that factorized with two threads once the other task had ended
 /// gave results that depended on which task ended first (the realization's two starts: spot's
@@ -91,8 +91,19 @@ class PairWorker {
 template <class F>
 void run_pair(F&& f) {
   if (hardware_threads() < 2) {
-    f(0);
-    f(1);
+    // One after the other, with the same contract: both run, the first exception after both.
+    std::exception_ptr first;
+    try {
+      f(0);
+    } catch (...) {
+      first = std::current_exception();
+    }
+    try {
+      f(1);
+    } catch (...) {
+      if (!first) first = std::current_exception();
+    }
+    if (first) std::rethrow_exception(first);
     return;
   }
   detail::enter_pair();
