@@ -308,7 +308,8 @@ int main(int argc, char** argv) {
   CLI11_PARSE(app, argc, argv);
   if (threads > 0) set_thread_limit(threads);
   // What the timings and the bits depend on, above every table.
-  std::printf("threads %d, BLAS kernels %s\n", hardware_threads(), blas_core().empty() ? "(not OpenBLAS)" : blas_core().c_str());
+  const std::string core = blas_core();
+  std::printf("threads %d, BLAS kernels %s\n", hardware_threads(), core.empty() ? "(not OpenBLAS)" : core.c_str());
   if (quad_table) return quad_bench(shared, only, quad_beta, sqp_tolerance);
   if (quad_volume) return quad_volume_bench(shared, only, save_dir);
   if (survey_all) return survey(shared, only, save_dir);

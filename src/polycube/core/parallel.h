@@ -37,11 +37,11 @@ std::string blas_core();
 void reexec_with_portable_blas(char** argv);
 
 /// Sets OpenBLAS's thread count, at most hardware_threads(), if the loaded BLAS is OpenBLAS (looked
-/// up at run time, so that any other BLAS works too); no effect otherwise. While a run_pair runs (in any thread), the count
-/// stays 1 whatever n is: OpenBLAS rounds differently with one thread and with two (its dpotrf
-/// blocks otherwise), so a task that factorized with two threads once the other task had ended
-/// gave results that depended on which task ended first (the realization's two starts: spot's
-/// polycube differed under load).
+/// up at run time, so that any other BLAS works too); no effect otherwise. While a run_pair runs
+/// (in any thread), the count stays 1 whatever n is: OpenBLAS rounds differently with one thread
+/// and with two (its dpotrf blocks otherwise), so a task that factorized with two threads once the
+/// other task had ended gave results that depended on which task ended first (the realization's
+/// two starts: spot's polycube differed under load).
 void set_blas_threads(int n);
 
 /// While an instance exists (in any thread), OpenMP parallel regions run on one thread; the setting

@@ -161,7 +161,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
   Stopwatch total;
   json report;
   // The BLAS kernels set the rounding, hence the bits of the results (reexec_with_portable_blas).
-  report["tool"] = {{"name", "polycube"}, {"version", POLYCUBE_VERSION}, {"blas_core", blas_core()}, {"threads", hardware_threads()}};
+  report["tool"] = {{"name", "polycube"},
+                    {"version", POLYCUBE_VERSION},
+                    {"blas_core", blas_core()},
+                    {"threads", hardware_threads()}};
   report["status"] = "running";
   report["timings"] = json::object();
   const fs::path out(opt.out_dir);

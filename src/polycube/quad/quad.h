@@ -173,8 +173,8 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
 
 /// Whether quads b (Hausdorff distance hb to the surface) are better than quads a (ha): fewer
 /// folded or degenerate quads; then fewer slivers (edge ratio over hex::kSliverEdgeRatio) unless
-/// they are more than 1.5 x farther from the surface; else b must be closer to the surface by more than 2% without
-/// giving up more than 10% of the minimum scaled Jacobian or 0.02 of the mean (the distance is
+/// they are more than 1.5 x farther from the surface; else b must be closer to the surface by more
+/// than 2% without giving up more than 10% of the minimum scaled Jacobian or 0.02 of the mean (the distance is
 /// what differs most between polycube maps of one layout; the quality is the floor kept).
 bool better_quads(const QuadQuality& a, double ha, const QuadQuality& b, double hb);
 
