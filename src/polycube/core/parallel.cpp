@@ -26,7 +26,7 @@ int hardware_threads() {
   return limit >= 1 ? std::min(machine, limit) : machine;
 }
 
-void set_thread_limit(int n) { thread_limit.store(std::max(0, n), std::memory_order_relaxed); }
+
 
 std::string blas_core() {
   using GetName = char* (*)();
@@ -64,6 +64,11 @@ void apply_blas_threads(int n) {
 void set_blas_threads(int n) {
   const std::lock_guard<std::mutex> lock(blas_mutex());
   apply_blas_threads(pair_depth > 0 ? 1 : std::min(n, hardware_threads()));
+}
+
+void set_thread_limit(int n) {
+  thread_limit.store(std::max(0, n), std::memory_order_relaxed);
+  set_blas_threads(hardware_threads());  // at once: not only from the next factorization on
 }
 
 namespace detail {

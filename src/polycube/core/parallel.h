@@ -14,8 +14,10 @@ namespace polycube {
 int hardware_threads();
 
 /// Limits the cores used to n (1 or 2; 0 lifts the limit, back to POLYCUBE_THREADS or the
-/// machine's). Set it before the work starts: the two counts round differently (OpenBLAS's
-/// factorizations), so a run is reproduced bit for bit only at the same count. One core pays where
+/// machine's); OpenBLAS's thread count follows at once (set_blas_threads; run_pipeline sets it
+/// again at its start, also for the environment's limit). Set it before the work starts: the two
+/// counts round differently (OpenBLAS's factorizations), so a run is reproduced bit for bit only at
+/// the same count. One core pays where
 /// other jobs share the machine: OpenBLAS's threads spin while they wait for each other, and a
 /// busy second core slows them down several times (fandisk's deformation, 35.6k tets, on 2 cores:
 /// alone 7.2 s with two threads, 12.0 s with one; beside one busy process 20.0-20.3 s with two,

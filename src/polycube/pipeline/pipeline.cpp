@@ -160,6 +160,12 @@ json tet_json(const TetMesh& tm, const TetQuality& q) {
 json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
   Stopwatch total;
   json report;
+  // OpenBLAS's thread count rounds its factorizations differently (set_blas_threads), and some
+  // stages factorize before any set_blas_threads call (the realization's own CHOLMOD solves): set
+  // it now, so that a stage gives the same bits whatever ran before it in the process (an
+  // extraction from a saved deformation at one thread differed from the full run's in the tenth
+  // digit of its ARAP: OpenBLAS's default of two threads against the deformation's one).
+  set_blas_threads(hardware_threads());
   // The BLAS kernels set the rounding, hence the bits of the results (reexec_with_portable_blas).
   report["tool"] = {{"name", "polycube"},
                     {"version", POLYCUBE_VERSION},
