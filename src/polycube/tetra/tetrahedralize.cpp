@@ -64,17 +64,21 @@ std::vector<int> add_surfaces(const SurfaceMesh& s, const std::vector<std::vecto
   return ent;
 }
 
-[[noreturn]] void mesher_failed(const SurfaceMesh& s, const std::string& gmsh_message) {
+// Throws Error(InvalidMesh) naming the crossing face pairs, if any, after `what`.
+void refuse_intersections(const SurfaceMesh& s, const std::string& what) {
   auto pairs = find_self_intersections(s.V, s.F, 10);
+  if (pairs.empty()) return;
   std::ostringstream os;
-  if (!pairs.empty()) {
-    os << "the surface intersects itself (the tet mesher reports: " << gmsh_message << "); intersecting face pairs:";
-    for (auto [a, b] : pairs) {
-      Vec3 c = (s.V.row(s.F(a, 0)) + s.V.row(s.F(a, 1)) + s.V.row(s.F(a, 2))).transpose() / 3;
-      os << "\n  faces " << a << " and " << b << " (near " << c.x() << ", " << c.y() << ", " << c.z() << ")";
-    }
-    throw Error(ErrorKind::InvalidMesh, os.str());
+  os << what << "; intersecting face pairs:";
+  for (auto [a, b] : pairs) {
+    Vec3 c = (s.V.row(s.F(a, 0)) + s.V.row(s.F(a, 1)) + s.V.row(s.F(a, 2))).transpose() / 3;
+    os << "\n  faces " << a << " and " << b << " (near " << c.x() << ", " << c.y() << ", " << c.z() << ")";
   }
+  throw Error(ErrorKind::InvalidMesh, os.str());
+}
+
+[[noreturn]] void mesher_failed(const SurfaceMesh& s, const std::string& gmsh_message) {
+  refuse_intersections(s, "the surface intersects itself (the tet mesher reports: " + gmsh_message + ")");
   throw Error(ErrorKind::Tetrahedralization, "tetrahedralization failed: " + gmsh_message);
 }
 
@@ -260,6 +264,14 @@ SurfaceMesh remesh_surface(const SurfaceMesh& s, const SurfaceLayout& layout, do
 TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const TetOptions& opt, const Hooks& hooks,
                        TetStats* stats) {
   TetStats st;
+  // Components that cross each other bound no solid (two overlapping spheres): each outer shell
+  // becomes a volume of its own and Gmsh meshes them overlapping, without an error, and the
+  // polycubes overlap too (exit 7 after the whole deformation). A single component that crosses
+  // itself is caught when the mesher fails (mesher_failed).
+  if (layout.num_components() > 1)
+    refuse_intersections(s, "the surface intersects itself: its " + std::to_string(layout.num_components()) +
+                                " components cross each other (a solid's boundary components must be disjoint, "
+                                "cavities nested inside their shell)");
   const double diag = bbox_diagonal(s.V);
   const auto cf = faces_by_component(layout);
   double volume = 0;
