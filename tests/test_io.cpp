@@ -211,6 +211,66 @@ TEST(IO, VtkPolydata) {
   EXPECT_EQ(io::read_mesh(p).F.rows(), 2);
 }
 
+// Other programs read our files: Gmsh's own MEDIT and VTK readers (not ours) open them, with every
+// element kind and the same corners in the same order (the hex and quad corner orders of MEDIT and
+// VTK are Gmsh's too), the coordinates to the last bit where the format keeps them (ASCII at 17
+// digits, VTK binary as doubles).
+TEST(IO, GmshReadsOurMeditAndVtkFiles) {
+  const MeshData m = all_elements();
+  const std::string dir = temp_dir("io_gmsh");
+  for (const char* name : {"a.mesh", "a.vtk", "b.vtk"}) {
+    const std::string p = dir + "/" + name;
+    if (std::string(name) == "a.mesh") io::write_medit(p, m);
+    else io::write_vtk(p, m, std::string(name) == "b.vtk", {});
+    io::Builder b;
+    io::GmshSession g;
+    g.run(ErrorKind::Parse, p, [&] {
+      gmsh::open(p);
+      EXPECT_EQ(g.last_error(), "") << name;
+      io::collect_gmsh_mesh(b, p, false);
+    });
+    MeshData r;
+    b.finish(r);
+    // Corner coordinates element by element: the numbering may differ, the geometry may not.
+    auto corners = [](const MeshData& d, const auto& E) {
+      std::vector<double> xyz;
+      for (Eigen::Index e = 0; e < E.rows(); ++e)
+        for (Eigen::Index k = 0; k < E.cols(); ++k)
+          for (int c = 0; c < 3; ++c) xyz.push_back(d.V(E(e, k), c));
+      return xyz;
+    };
+    EXPECT_EQ(corners(r, r.F), corners(m, m.F)) << name;
+    EXPECT_EQ(corners(r, r.Q), corners(m, m.Q)) << name;
+    EXPECT_EQ(corners(r, r.T), corners(m, m.T)) << name;
+    EXPECT_EQ(corners(r, r.H), corners(m, m.H)) << name;
+  }
+  // Orientation: a positive tet and a unit hex in our convention (core/types.h) have a positive
+  // Jacobian in Gmsh's reading of each format (a corner order Gmsh read otherwise would turn them).
+  MeshData c;
+  c.V.resize(8, 3);
+  c.V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 0, 0, 1, 1, 0, 1, 1, 1, 1, 0, 1, 1;
+  c.T.resize(1, 4);
+  c.T << 0, 1, 3, 4;
+  c.H.resize(1, 8);
+  c.H << 0, 1, 2, 3, 4, 5, 6, 7;
+  for (const char* name : {"c.mesh", "c.vtk"}) {
+    const std::string p = dir + "/" + name;
+    if (std::string(name) == "c.mesh") io::write_medit(p, c);
+    else io::write_vtk(p, c, true, {});
+    io::GmshSession g;
+    g.run(ErrorKind::Parse, p, [&] {
+      gmsh::open(p);
+      for (int type : {4, 5}) {  // Gmsh's 4-node tetrahedron and 8-node hexahedron
+        std::vector<double> local, weights, jac, det, xyz;
+        gmsh::model::mesh::getIntegrationPoints(type, "Gauss1", local, weights);
+        gmsh::model::mesh::getJacobians(type, local, jac, det, xyz);
+        ASSERT_FALSE(det.empty()) << name << " type " << type;
+        for (double d : det) EXPECT_GT(d, 0) << name << " type " << type;
+      }
+    });
+  }
+}
+
 TEST(IO, MshRoundTripSurfaceAndVolume) {
   auto s = odd_sphere();
   auto p = temp_dir("io") + "/s.msh";
