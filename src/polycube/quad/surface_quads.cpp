@@ -112,9 +112,19 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
   // monotone per axis but not affine, so the image of a sliver triangle (Y) can come out folded
   // (spot.obj: one polycube triangle of max isometric distortion 1e4 did, and a grid point was
   // then in no triangle), while X is fold-free.
-  std::map<std::array<int, 3>, int> vid;
+  // Keyed by the surface's connected component too: the polycubes of separate components may
+  // overlap (two overlapping spheres, each its own cube), and a grid point of one at the same
+  // integers as the other's would be taken for it (basic/two_spheres: quads stretched across
+  // both, Hausdorff 0.12 of the diagonal).
+  std::vector<int> component(F.rows());
+  {
+    UnionFind uf(static_cast<size_t>(X.rows()));
+    for (int f = 0; f < F.rows(); ++f) uf.unite(F(f, 0), F(f, 1)), uf.unite(F(f, 0), F(f, 2));
+    for (int f = 0; f < F.rows(); ++f) component[f] = uf.find(F(f, 0));
+  }
+  std::map<std::array<int, 4>, int> vid;  // (component, x, y, z)
   std::vector<Vec3> pos;
-  std::set<std::array<int, 4>> cells;  // (label, plane integer, i, j)
+  std::set<std::array<int, 5>> cells;  // (component, label, plane integer, i, j)
   for (int f = 0; f < F.rows(); ++f) {
     const int k = labels[f] / 2, a = (k + 1) % 3, b = (k + 2) % 3;
     const int c = static_cast<int>(std::lround(Y(F(f, 0), k)));
@@ -150,10 +160,11 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       for (int j = static_cast<int>(std::ceil(lo_b - eps)); j <= static_cast<int>(std::floor(hi_b + eps)); ++j) {
         Eigen::Vector3d l = bary(at(i, j));
         if (!inside(l)) continue;
-        std::array<int, 3> key;
-        key[k] = c;
-        key[a] = i;
-        key[b] = j;
+        std::array<int, 4> key;
+        key[0] = component[f];
+        key[1 + k] = c;
+        key[1 + a] = i;
+        key[1 + b] = j;
         if (vid.count(key)) continue;
         l = l.cwiseMax(0.0);
         l /= l.sum();
@@ -164,22 +175,23 @@ QuadResult quad_mesh_from_surface_polycube(const MatX3d& rest, const MatX3i& F, 
       }
     for (int i = static_cast<int>(std::floor(lo_a)); i < static_cast<int>(std::ceil(hi_a)); ++i)
       for (int j = static_cast<int>(std::floor(lo_b)); j < static_cast<int>(std::ceil(hi_b)); ++j)
-        if (inside(bary(at(i + 0.5, j + 0.5)))) cells.insert({labels[f], c, i, j});
+        if (inside(bary(at(i + 0.5, j + 0.5)))) cells.insert({component[f], labels[f], c, i, j});
   }
   r.V.resize(static_cast<Eigen::Index>(pos.size()), 3);
   for (size_t v = 0; v < pos.size(); ++v) r.V.row(static_cast<Eigen::Index>(v)) = pos[v].transpose();
   std::vector<std::array<int, 4>> quads;
   int missing = 0;
-  for (const auto& [label, c, i, j] : cells) {
+  for (const auto& [comp, label, c, i, j] : cells) {
     const int k = label / 2, a = (k + 1) % 3, b = (k + 2) % 3;
     const int di[4] = {0, 1, 1, 0}, dj[4] = {0, 0, 1, 1};
     std::array<int, 4> q;
     bool ok = true;
     for (int t = 0; t < 4 && ok; ++t) {
-      std::array<int, 3> key;
-      key[k] = c;
-      key[a] = i + di[t];
-      key[b] = j + dj[t];
+      std::array<int, 4> key;
+      key[0] = comp;
+      key[1 + k] = c;
+      key[1 + a] = i + di[t];
+      key[1 + b] = j + dj[t];
       const auto it = vid.find(key);
       ok = it != vid.end();
       if (ok) q[t] = it->second;
