@@ -26,8 +26,6 @@ int hardware_threads() {
   return limit >= 1 ? std::min(machine, limit) : machine;
 }
 
-
-
 std::string blas_core() {
   using GetName = char* (*)();
   static const auto f = reinterpret_cast<GetName>(dlsym(RTLD_DEFAULT, "openblas_get_corename"));

@@ -43,7 +43,9 @@ struct QuadOptions {
   /// 0.903, Hausdorff 26.7e-3 -> 28.5e-3 (its thin-step retry now kept: 3212 -> 2958 quads); cow
   /// 295 -> 151, the same Hausdorff; spot 77.5 -> 68.6; fandisk and rocker at Table I's counts and
   /// blub unchanged (the thin-step retries also run when the extracted grid had slivers, see
-  /// thin_step_retries). false: neither.
+  /// thin_step_retries). Nor may the pattern search or a feature vertex's slide take the quads
+  /// around a vertex over an edge ratio of 100 unless they were (mambo_B1 at 2000 quads: the last
+  /// pass's slides made one of 3278; 59.5 with the rule). false: none of these.
   bool widen_slivers = true;
   /// The shape pass, before the last passes: the vertices of quads with an edge ratio over
   /// max_edge_ratio, and shape_rings rings of neighbours around them, move on the surface (free
