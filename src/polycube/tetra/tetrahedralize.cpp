@@ -271,7 +271,8 @@ TetMesh tetrahedralize(const SurfaceMesh& s, const SurfaceLayout& layout, const 
   if (layout.num_components() > 1)
     refuse_intersections(s, "the surface intersects itself: its " + std::to_string(layout.num_components()) +
                                 " components cross each other (a solid's boundary components must be disjoint, "
-                                "cavities nested inside their shell)");
+                                "cavities nested inside their shell; --surface takes each component's surface on "
+                                "its own)");
   const double diag = bbox_diagonal(s.V);
   const auto cf = faces_by_component(layout);
   double volume = 0;
