@@ -305,10 +305,12 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1.0));
   app.add_option("--max-pinches", opt.polycube.cleanup.max_pinches, "Polycube labels: pinches opened at most per cleanup")
       ->capture_default_str()->check(CLI::Range(0, 100000));
-  app.add_option("--collapsed-ratio", opt.polycube.collapsed_ratio,
+  double collapsed_ratio = -1;
+  app.add_option("--collapsed-ratio", collapsed_ratio,
                  "Polycube labels: boundary triangles whose deformed area is below this fraction of the median "
-                 "deformed/rest area ratio take their neighbours' label (their normal is unreliable); 0 = off")
-      ->capture_default_str()->check(CLI::Range(0.0, 0.5));
+                 "deformed/rest area ratio take their neighbours' label (their normal is unreliable); 0 = off "
+                 "(default 0.001, 0 in surface mode)")
+      ->check(CLI::Range(0.0, 0.5));
   bool no_rotation = false;
   app.add_flag("--no-rotation", no_rotation, "Polycube deformation: keep the input orientation (no global rotation, Eq. 3)");
   bool run_hex = false;
@@ -488,6 +490,7 @@ int main(int argc, char** argv) {
   }
   if (no_cleanup) opt.polycube.cleanup = {false, false, false, false};
   if (pinch_above >= 0) opt.polycube.cleanup.pinch_above = opt.polycube.cleanup.pinch_above_surface = pinch_above;
+  if (collapsed_ratio >= 0) opt.polycube.collapsed_ratio = opt.polycube.collapsed_ratio_surface = collapsed_ratio;
   auto logger = spdlog::stderr_color_mt("polycube");
   if (verbose) {
     // With -v, each line gives the seconds since the start: where a long run spends its time.

@@ -300,6 +300,13 @@ TEST(Cli, CollapsedRatioOption) {
   EXPECT_DOUBLE_EQ(j["polycube"]["cleanup"]["collapsed_ratio"].get<double>(), 0.3);
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
   EXPECT_EQ(run_cli("--example box_hole --until polycube --collapsed-ratio 0.6 -q -o " + out).code, 2);
+  // Surface mode: off unless given.
+  r = run_cli("--example box_hole --surface --until polycube -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_EQ(report(out)["polycube"]["cleanup"]["collapsed_ratio"].get<double>(), 0.0);
+  r = run_cli("--example box_hole --surface --until polycube --collapsed-ratio 0.3 -q -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  EXPECT_DOUBLE_EQ(report(out)["polycube"]["cleanup"]["collapsed_ratio"].get<double>(), 0.3);
 }
 
 TEST(Cli, RealizationOptionsReachTheReport) {

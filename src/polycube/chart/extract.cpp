@@ -66,6 +66,7 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   const int collapsed = relabel_collapsed(rest, deformed, B, e.labels, opt.collapsed_ratio);
   e.cleanup = cleanup_labels(deformed, B, e.labels, opt.cleanup, hooks);
   e.cleanup.collapsed = collapsed;
+  e.cleanup.collapsed_ratio = opt.collapsed_ratio;
   e.cleanup.relabelled_faces = 0;
   for (size_t f = 0; f < raw.size(); ++f) e.cleanup.relabelled_faces += raw[f] != e.labels[f];
   if (collapsed > 0) hooks.debug(std::to_string(collapsed) + " collapsed triangles took their neighbours' label");
@@ -829,6 +830,7 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   }
   ExtractOptions surface = opt;
   surface.cleanup.pinch_above = opt.cleanup.pinch_above_surface;
+  surface.collapsed_ratio = opt.collapsed_ratio_surface;
   PolycubeExtraction e = extract(rest, T, B, deformed, surface, hooks, nullptr);
   // The pinches opened below the volume threshold can leave a layout no start realizes
   // (humanoid, 2026-11-28): the volume threshold's layout is tried before giving up, unless no
@@ -837,7 +839,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   hooks.debug("no polycube realized with the pinches of charts above " + std::to_string(opt.cleanup.pinch_above_surface) +
               " of the area opened (" + e.realized.failure + "); extracting again with only those above " +
               std::to_string(opt.cleanup.pinch_above));
-  PolycubeExtraction again = extract(rest, T, B, deformed, opt, hooks, nullptr);
+  ExtractOptions coarser = surface;
+  coarser.cleanup.pinch_above = opt.cleanup.pinch_above;
+  PolycubeExtraction again = extract(rest, T, B, deformed, coarser, hooks, nullptr);
   return again.realized.success ? again : e;
 }
 

@@ -34,6 +34,12 @@ struct ExtractOptions {
   /// Triangles whose deformed area is below this fraction of the median deformed/rest area ratio
   /// take their neighbours' label before cleanup (relabel_collapsed); 0 = off.
   double collapsed_ratio = 1e-3;
+  /// collapsed_ratio for surface mode (extract_polycube with no tets). Off: the surface ARAP
+  /// flattens thin parts into sheets whose edges are rows of slim triangles, and their labels taken
+  /// from the neighbours start a cascade of removals (blub, 2026-12-07: 41 triangles relabelled,
+  /// among them the rims of its tail fin, which then became part of the body's -Z bottom and was
+  /// pressed onto it: Hausdorff 264e-3 of the diagonal; off, 140e-3, the tail kept).
+  double collapsed_ratio_surface = 0;
   /// When the realization leaves boundary triangles facing away from their label (every tet
   /// positive), relabel them from their neighbours and retry, at most this many times.
   int relabel_attempts = 4;

@@ -104,6 +104,7 @@ struct CleanupStats {
   double smallest_pinch = std::numeric_limits<double>::infinity();
   int relabelled_faces = 0;  ///< triangles whose final label differs from the initial one
   int collapsed = 0;   ///< triangles relabelled by relabel_collapsed (set by extract_polycube)
+  double collapsed_ratio = 0;  ///< the ratio relabel_collapsed ran with (set by extract_polycube)
   int misoriented = 0; ///< triangles relabelled after a realization left them facing away (extract_polycube)
   int rounds = 0;
 };

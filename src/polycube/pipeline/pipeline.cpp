@@ -857,7 +857,7 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                          {"degree3", ex.cleanup.degree3},       {"opposite", ex.cleanup.opposite}, {"rims", ex.cleanup.rims}, {"pinches", ex.cleanup.pinches},
                          {"collapsed", ex.cleanup.collapsed},   {"misoriented", ex.cleanup.misoriented},
                          {"relabelled_faces", ex.cleanup.relabelled_faces},
-                         {"collapsed_ratio", opt.polycube.collapsed_ratio},
+                         {"collapsed_ratio", ex.cleanup.collapsed_ratio},
                          {"pinch_above", ex.cleanup.pinch_above},
                          {"max_pinches", opt.polycube.cleanup.max_pinches}};
         pj["realize_options"] = {{"start", opt.polycube.realize.start},
