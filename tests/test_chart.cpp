@@ -154,6 +154,32 @@ TEST(Chart, CleanupRelabelsASingleFlatTriangleAtABorderVertex) {
   }
 }
 
+// A step: a +Z square at height 0, a riser at x = 1, a +Z square at height 1. Labelled +Z all over
+// (a riser relabelled into its neighbours), one chart spans the two heights; with the riser -X,
+// each +Z chart is a plane.
+TEST(Chart, UnflatChartsAreTheOnesSpanningHeights) {
+  MatX3d V(8, 3);
+  V << 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0,  // bottom square
+      1, 0, 1, 1, 1, 1,                      // riser's top edge
+      2, 0, 1, 2, 1, 1;                      // top square
+  MatX3i F(6, 3);
+  F << 0, 1, 2, 0, 2, 3,  // bottom (+Z)
+      1, 4, 5, 1, 5, 2,   // riser (x = 1)
+      4, 6, 7, 4, 7, 5;   // top (+Z)
+  std::vector<int> all_up(6, 4);
+  const auto u = chart::unflat_charts(V, F, all_up, 0.5);
+  ASSERT_EQ(u.size(), 1u);
+  EXPECT_EQ(u[0].label, 4);
+  EXPECT_EQ(u[0].faces, 6);
+  EXPECT_DOUBLE_EQ(u[0].spread, 1.0);  // centroid heights 0 to 1
+  // The area-weighted median height is the riser's lower triangle's (1/3): the top is farther.
+  EXPECT_GE(u[0].farthest, 4);
+  EXPECT_TRUE(chart::unflat_charts(V, F, all_up, 1.0).empty());  // spread not over 1
+  std::vector<int> stepped = all_up;
+  stepped[2] = stepped[3] = 1;  // the riser -X
+  EXPECT_TRUE(chart::unflat_charts(V, F, stepped, 0.01).empty());
+}
+
 TEST(Chart, OppositeChartsSideBySideAreReported) {
   auto s = grid_box(4);
   auto labels = chart::label_by_normal(s.V, s.F);

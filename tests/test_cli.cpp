@@ -299,6 +299,7 @@ TEST(Cli, CollapsedRatioOption) {
   json j = report(out);
   EXPECT_DOUBLE_EQ(j["polycube"]["cleanup"]["collapsed_ratio"].get<double>(), 0.3);
   EXPECT_EQ(j["polycube"]["inverted_tets"], 0);
+  EXPECT_EQ(j["polycube"]["unflat_charts"]["count"], 0);  // every chart of the box with a hole is a plane
   EXPECT_EQ(run_cli("--example box_hole --until polycube --collapsed-ratio 0.6 -q -o " + out).code, 2);
   // Surface mode: off unless given.
   r = run_cli("--example box_hole --surface --until polycube -q -o " + out);

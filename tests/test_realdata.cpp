@@ -489,6 +489,9 @@ TEST(RealSurfaceOrganic, BlubKeepsItsTailInSurfaceMode) {
   // farthest from the quads.
   ASSERT_EQ(q["hausdorff_input_to_quad_at"].size(), 3u);
   EXPECT_GT(q["hausdorff_input_to_quad_at"][2].get<double>(), -0.75) << q.dump();
+  // Nor does a chart join the tail to a plane at another height (with the collapsed triangles
+  // relabelled, the -Z bottom spanned 0.32 of the diagonal down to the tail's tip).
+  for (const auto& u : p["unflat_charts"]["widest"]) EXPECT_GT(u["at"][2].get<double>(), -0.75) << u.dump();
 }
 
 // organic/homer in surface mode: its cleanup relabelled whole charts of degree 3 pinched between

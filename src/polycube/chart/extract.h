@@ -75,6 +75,10 @@ struct ExtractOptions {
   /// lower ARAP distortion. The harmonic start spreads each chart between its borders far from the
   /// deformed surface (fandisk at 724 quads: ARAP 0.097 against the deformation's 0.035).
   bool repair_deformed_start = true;
+  /// Charts of the cleaned labelling whose triangles spread along their axis over more than this
+  /// fraction of the deformed shape's bounding-box diagonal are listed in
+  /// PolycubeExtraction::unflat (a diagnostic; nothing is changed for them).
+  double unflat_above = 0.05;
   CleanupOptions cleanup;
   RealizeOptions realize;
 };
@@ -122,6 +126,12 @@ struct PolycubeExtraction {
   /// quads, Hausdorff 6.76e-3 from the repaired deformed start (ARAP 0.035) against 3.80e-3 from
   /// the harmonic start (0.097); quad::surface_quads_best_start extracts both and keeps the better.
   std::shared_ptr<const PolycubeExtraction> alternative;
+  /// Charts of `labels` (over B, on the deformed positions) far from planar
+  /// (ExtractOptions::unflat_above), widest first: where the polycube joins parts of the deformed
+  /// shape at different heights into one plane (blub's tail fin pressed onto its body, octopus-low's
+  /// tentacles, cow's hooves). unflat_at: per entry, the centroid of its farthest triangle at rest.
+  std::vector<UnflatChart> unflat;
+  std::vector<Vec3> unflat_at;
 };
 
 /// rest/T/B: tet mesh and outward boundary triangles; deformed: the deformation's result.

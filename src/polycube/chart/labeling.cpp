@@ -555,6 +555,45 @@ CleanupStats cleanup_labels(const MatX3d& X, const MatX3i& F, std::vector<int>& 
   return s;
 }
 
+std::vector<UnflatChart> unflat_charts(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels,
+                                       double above) {
+  const Charts c = build_charts(X, F, labels);
+  const int nf = static_cast<int>(F.rows());
+  std::vector<double> height(nf), area(nf);
+  std::vector<std::vector<int>> faces(c.count());
+  for (int f = 0; f < nf; ++f) {
+    const Vec3 a = X.row(F(f, 0)), b = X.row(F(f, 1)), cc = X.row(F(f, 2));
+    height[f] = (a + b + cc)[axis_of(c.label[c.of_face[f]])] / 3.0;
+    area[f] = 0.5 * (b - a).cross(cc - a).norm();
+    faces[c.of_face[f]].push_back(f);
+  }
+  std::vector<UnflatChart> out;
+  for (int i = 0; i < c.count(); ++i) {
+    const auto [lo, hi] = std::minmax_element(faces[i].begin(), faces[i].end(),
+                                              [&](int a, int b) { return height[a] < height[b]; });
+    if (!(height[*hi] - height[*lo] > above)) continue;
+    std::vector<int> sorted = faces[i];
+    std::sort(sorted.begin(), sorted.end(), [&](int a, int b) { return height[a] < height[b]; });
+    double total = 0;
+    for (int f : sorted) total += area[f];
+    double median = height[sorted.front()];
+    for (double acc = 0; int f : sorted)
+      if ((acc += area[f]) >= 0.5 * total) {
+        median = height[f];
+        break;
+      }
+    UnflatChart u;
+    u.chart = i;
+    u.label = c.label[i];
+    u.faces = c.faces[i];
+    u.spread = height[*hi] - height[*lo];
+    u.farthest = median - height[*lo] > height[*hi] - median ? *lo : *hi;
+    out.push_back(u);
+  }
+  std::stable_sort(out.begin(), out.end(), [](const UnflatChart& a, const UnflatChart& b) { return a.spread > b.spread; });
+  return out;
+}
+
 ChartReport check_charts(const MatX3i& F, int nv, const std::vector<int>& labels) {
   ChartReport r;
   const MatX3i N = face_adjacency(F);

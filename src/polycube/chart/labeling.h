@@ -141,6 +141,25 @@ struct ChartReport {
   std::vector<std::string> problems;  ///< the first problems found, each naming charts/vertices
 };
 
+/// A chart whose triangles lie at different heights along its axis on the positions it was
+/// labelled on (unflat_charts): the polycube puts it in one plane, which distorts or crushes the
+/// parts it joins. The raw labelling of a converged deformation has none (its charts' triangles
+/// all face their label); the cleanup makes them when it relabels triangles into a chart of their
+/// new label at another height (a chart removed into a neighbour, a pinch's or a rim's triangles
+/// joining a chart of that label).
+struct UnflatChart {
+  int chart = -1;       ///< id in build_charts(X, F, labels)
+  int label = -1;
+  int faces = 0;
+  double spread = 0;    ///< range of its triangles' centroid heights along its axis
+  int farthest = -1;    ///< its triangle farthest from its area-weighted median height
+};
+
+/// Charts of (X, F, labels) whose triangles' centroids spread along the chart's axis over more
+/// than `above` (a length in X's units), widest first.
+std::vector<UnflatChart> unflat_charts(const MatX3d& X, const MatX3i& F, const std::vector<int>& labels,
+                                       double above);
+
 /// Checks the chart graph of labelled triangles (closed, consistently oriented F over nv vertices).
 ChartReport check_charts(const MatX3i& F, int nv, const std::vector<int>& labels);
 
