@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 #include "polycube/core/error.h"
@@ -58,6 +59,19 @@ std::string test_name(const ::testing::TestParamInfo<std::string>& info) {
   for (char& c : s)
     if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
   return s;
+}
+
+// The CLI's surface quads (`--surface --quad`) of ../shared/meshes/<file> into the temporary folder
+// `name`: nullopt when the mesh is absent (the caller skips), a null json (the exit code and output
+// reported as a failure) when the run failed, else its report.
+std::optional<nlohmann::json> surface_quads_report(const std::string& file, const std::string& name) {
+  const std::string path = shared_dir() + "/meshes/" + file;
+  if (!fs::exists(path)) return std::nullopt;
+  const std::string out = temp_dir(name);
+  const RunResult r = run_cli(path + " --surface --quad -q -o " + out);
+  EXPECT_EQ(r.code, 0) << r.output;
+  if (r.code != 0) return nlohmann::json();
+  return nlohmann::json::parse(read_text(out + "/report.json"));
 }
 
 }  // namespace
@@ -449,12 +463,10 @@ TEST(RealSurfaceQuads, SlidingTheWorstQuadsFeatureVerticesMakesNoSliver) {
 // double sheets, then crushed to 0.2% of their area by the realization: no quad on them, Hausdorff
 // 63e-3 of the diagonal, 2026-11-26); the deformation is run again with the thickness barrier.
 TEST(RealSurfaceOrganic, SpotKeepsItsHornsInSurfaceMode) {
-  const std::string path = shared_dir() + "/meshes/organic/spot.obj";
-  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  const std::string out = temp_dir("spot_surface");
-  RunResult r = run_cli(path + " --surface --quad -q -o " + out);
-  ASSERT_EQ(r.code, 0) << r.output;
-  const auto j = nlohmann::json::parse(read_text(out + "/report.json"));
+  const auto report = surface_quads_report("organic/spot.obj", "spot_surface");
+  if (!report) GTEST_SKIP() << "organic/spot.obj absent (../shared missing): skipped";
+  ASSERT_FALSE(report->is_null());
+  const nlohmann::json& j = *report;
   const auto& p = j["polycube"];
   EXPECT_GT(p["thin_crushed"].get<double>(), 1e-3) << "the plain deformation no longer folds the horns";
   EXPECT_GT(p["thickness_pairs"].get<int>(), 0);
@@ -472,12 +484,10 @@ TEST(RealSurfaceOrganic, SpotKeepsItsHornsInSurfaceMode) {
 // 0): 56 corners, the tail kept, 140e-3 (the pectoral fins, pressed onto the body by the
 // deformation, are still lost: the farthest point is on one of them).
 TEST(RealSurfaceOrganic, BlubKeepsItsTailInSurfaceMode) {
-  const std::string path = shared_dir() + "/meshes/organic/blub_triangulated.obj";
-  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  const std::string out = temp_dir("blub_surface");
-  RunResult r = run_cli(path + " --surface --quad -q -o " + out);
-  ASSERT_EQ(r.code, 0) << r.output;
-  const auto j = nlohmann::json::parse(read_text(out + "/report.json"));
+  const auto report = surface_quads_report("organic/blub_triangulated.obj", "blub_surface");
+  if (!report) GTEST_SKIP() << "organic/blub_triangulated.obj absent (../shared missing): skipped";
+  ASSERT_FALSE(report->is_null());
+  const nlohmann::json& j = *report;
   const auto& p = j["polycube"];
   EXPECT_EQ(p["cleanup"]["collapsed_ratio"].get<double>(), 0.0);
   EXPECT_EQ(p["cleanup"]["collapsed"].get<int>(), 0);
@@ -499,12 +509,10 @@ TEST(RealSurfaceOrganic, BlubKeepsItsTailInSurfaceMode) {
 // charts to 6 whose polycube no realization reached (exit 7, 2026-11-26). The pinch now gets its
 // missing side instead: 52 charts, realized, quads.
 TEST(RealSurfaceOrganic, HomerKeepsItsLayoutAndIsRealized) {
-  const std::string path = shared_dir() + "/meshes/organic/homer.obj";
-  if (!fs::exists(path)) GTEST_SKIP() << path << " absent (../shared missing): skipped";
-  const std::string out = temp_dir("homer_surface");
-  RunResult r = run_cli(path + " --surface --quad -q -o " + out);
-  ASSERT_EQ(r.code, 0) << r.output;
-  const auto j = nlohmann::json::parse(read_text(out + "/report.json"));
+  const auto report = surface_quads_report("organic/homer.obj", "homer_surface");
+  if (!report) GTEST_SKIP() << "organic/homer.obj absent (../shared missing): skipped";
+  ASSERT_FALSE(report->is_null());
+  const nlohmann::json& j = *report;
   const auto& p = j["polycube"];
   EXPECT_GE(p["cleanup"]["pinches"].get<int>(), 1);
   EXPECT_GE(p["charts"].get<int>(), 30) << "the cleanup cascaded";
