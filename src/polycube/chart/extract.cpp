@@ -803,8 +803,8 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
 
 }  // namespace
 
-PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
-                                      const ExtractOptions& opt, const Hooks& hooks);
+static PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
+                                             const MatX3d& deformed, const ExtractOptions& opt, const Hooks& hooks);
 
 PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
                                     const ExtractOptions& opt, const Hooks& hooks) {
@@ -820,8 +820,9 @@ PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const M
   return e;
 }
 
-PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
-                                      const ExtractOptions& opt, const Hooks& hooks) {
+// extract_polycube without the unflat charts' diagnostic.
+static PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
+                                             const MatX3d& deformed, const ExtractOptions& opt, const Hooks& hooks) {
   if (T.rows() > 0) {
     ExtractOptions o = opt;
     if (opt.corner_splits == "on") o.realize.split_corner_edges = true;

@@ -804,8 +804,9 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           surface_mode = true;
           report["mode"] = "volume deformation, surface polycube";
         }
-        // Charts the cleanup left far from planar on the deformed shape (chart::unflat_charts).
-        {
+        // Charts the cleanup left far from planar on the deformed shape (chart::unflat_charts); not
+        // for a given polycube map (no labelling of a deformation).
+        if (!given_map) {
           json unflat = json::array();
           Eigen::AlignedBox3d dbox;
           for (int v = 0; v < dr.X.rows(); ++v) dbox.extend(dr.X.row(v).transpose());
