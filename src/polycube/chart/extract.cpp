@@ -801,28 +801,9 @@ PolycubeExtraction extract(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
   return e;
 }
 
-}  // namespace
-
-static PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
-                                             const MatX3d& deformed, const ExtractOptions& opt, const Hooks& hooks);
-
-PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
-                                    const ExtractOptions& opt, const Hooks& hooks) {
-  PolycubeExtraction e = extract_both_modes(rest, T, B, deformed, opt, hooks);
-  if (opt.unflat_above > 0 && deformed.rows() > 0 && static_cast<int>(e.labels.size()) == B.rows()) {
-    const double diagonal = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
-    e.unflat = unflat_charts(deformed, B, e.labels, opt.unflat_above * diagonal);
-    for (const UnflatChart& u : e.unflat) {
-      const int f = u.farthest;
-      e.unflat_at.push_back((rest.row(B(f, 0)) + rest.row(B(f, 1)) + rest.row(B(f, 2))).transpose() / 3.0);
-    }
-  }
-  return e;
-}
-
 // extract_polycube without the unflat charts' diagnostic.
-static PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B,
-                                             const MatX3d& deformed, const ExtractOptions& opt, const Hooks& hooks) {
+PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                                      const ExtractOptions& opt, const Hooks& hooks) {
   if (T.rows() > 0) {
     ExtractOptions o = opt;
     if (opt.corner_splits == "on") o.realize.split_corner_edges = true;
@@ -861,6 +842,22 @@ static PolycubeExtraction extract_both_modes(const MatX3d& rest, const MatX4i& T
   coarser.cleanup.pinch_above = opt.cleanup.pinch_above;
   PolycubeExtraction again = extract(rest, T, B, deformed, coarser, hooks, nullptr);
   return again.realized.success ? again : e;
+}
+
+}  // namespace
+
+PolycubeExtraction extract_polycube(const MatX3d& rest, const MatX4i& T, const MatX3i& B, const MatX3d& deformed,
+                                    const ExtractOptions& opt, const Hooks& hooks) {
+  PolycubeExtraction e = extract_both_modes(rest, T, B, deformed, opt, hooks);
+  if (opt.unflat_above > 0 && deformed.rows() > 0 && static_cast<int>(e.labels.size()) == B.rows()) {
+    const double diagonal = (deformed.colwise().maxCoeff() - deformed.colwise().minCoeff()).norm();
+    e.unflat = unflat_charts(deformed, B, e.labels, opt.unflat_above * diagonal);
+    for (UnflatChart& u : e.unflat) {
+      const int f = u.farthest;
+      u.at = (rest.row(B(f, 0)) + rest.row(B(f, 1)) + rest.row(B(f, 2))).transpose() / 3.0;
+    }
+  }
+  return e;
 }
 
 int flip_folded_edges(const MatX3d& X, MatX3i& F, const std::vector<int>& labels) {

@@ -129,9 +129,8 @@ struct PolycubeExtraction {
   /// Charts of `labels` (over B, on the deformed positions) far from planar
   /// (ExtractOptions::unflat_above), widest first: where the polycube joins parts of the deformed
   /// shape at different heights into one plane (blub's tail fin pressed onto its body, octopus-low's
-  /// tentacles, cow's hooves). unflat_at: per entry, the centroid of its farthest triangle at rest.
+  /// tentacles, cow's hooves); each one's `at` is its farthest triangle's centroid at rest.
   std::vector<UnflatChart> unflat;
-  std::vector<Vec3> unflat_at;
 };
 
 /// rest/T/B: tet mesh and outward boundary triangles; deformed: the deformation's result.

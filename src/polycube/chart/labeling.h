@@ -153,6 +153,7 @@ struct UnflatChart {
   int faces = 0;
   double spread = 0;    ///< range of its triangles' centroid heights along its axis
   int farthest = -1;    ///< its triangle farthest from its area-weighted median height
+  Vec3 at = Vec3::Zero();  ///< that triangle's centroid at rest (set by extract_polycube)
 };
 
 /// Charts of (X, F, labels) whose triangles' centroids spread along the chart's axis over more

@@ -813,21 +813,19 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           const double ddiag = std::max(1e-300, dbox.diagonal().norm());
           for (size_t i = 0; i < ex.unflat.size() && i < 10; ++i) {
             const chart::UnflatChart& u = ex.unflat[i];
-            const Vec3& at = ex.unflat_at[i];
             unflat.push_back({{"label", chart::label_name(u.label)}, {"triangles", u.faces},
-                              {"spread_rel", u.spread / ddiag}, {"at", {at[0], at[1], at[2]}}});
+                              {"spread_rel", u.spread / ddiag}, {"at", {u.at[0], u.at[1], u.at[2]}}});
           }
           report["polycube"]["unflat_charts"] = {{"count", ex.unflat.size()},
                                                  {"above_rel", opt.polycube.unflat_above},
                                                  {"widest", unflat}};
           if (!ex.unflat.empty()) {
             const chart::UnflatChart& u = ex.unflat.front();
-            const Vec3& at = ex.unflat_at.front();
             std::ostringstream os;
             os << ex.unflat.size() << " chart(s) of the labelling join parts of the deformed shape at different "
                << "heights into one polycube face; the widest, " << chart::label_name(u.label) << " (" << u.faces
                << " triangles), spans " << u.spread / ddiag << " of the diagonal along its axis, its farthest "
-               << "triangle near the input's point (" << at[0] << ", " << at[1] << ", " << at[2]
+               << "triangle near the input's point (" << u.at[0] << ", " << u.at[1] << ", " << u.at[2]
                << "): the polycube flattens what it joins there (distortion, or a part pressed away)";
             hooks.warn(os.str());
           }
