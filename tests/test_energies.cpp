@@ -180,6 +180,39 @@ TEST(Energies, ArapGradientHessianAndZeroAtRest) {
   EXPECT_NEAR(E(1.5 * s.X0, nullptr, nullptr), 0.7 * 0.5 * 3 * 0.25, 1e-12);
 }
 
+// The SQP solver computes arap_energy's two halves on threads of its own (arap_energy_half) and
+// relies on getting arap_energy's result to the last bit, so that runs do not depend on where
+// each half ran: energy weight (E0 + E1), the first half's gradient added into the caller's
+// vector, the second half's summed apart and added after.
+TEST(Energies, ArapHalvesRecombineToTheSameBits) {
+  const SurfaceMesh b = sphere(3);
+  const TetMesh tm = tet_mesh_of(b.V, b.F, 6000);
+  ASSERT_GE(tm.T.rows(), kArapSplitTets) << "the mesh must be large enough for arap_energy to split";
+  const ArapRest rest = ArapRest::build(tm.V, tm.T);
+  std::mt19937 rng(5);
+  std::normal_distribution<double> noise(0, 0.01);
+  MatX3d X = tm.V;
+  for (int v = 0; v < X.rows(); ++v)
+    for (int k = 0; k < 3; ++k) X(v, k) = 1.3 * X(v, k) + noise(rng);
+  const double w = 0.7;
+  // A gradient that already holds other terms, as the solver's does.
+  Eigen::VectorXd base(X.size());
+  for (int i = 0; i < base.size(); ++i) base[i] = noise(rng);
+  Eigen::VectorXd g_whole = base;
+  const double E_whole = arap_energy(X, tm.T, rest, w, &g_whole, nullptr);
+  Eigen::VectorXd g_halves = base, g_second = Eigen::VectorXd::Zero(X.size());
+  const double E0 = arap_energy_half(X, tm.T, rest, w, 0, &g_halves);
+  const double E1 = arap_energy_half(X, tm.T, rest, w, 1, &g_second);
+  g_halves += g_second;
+  EXPECT_EQ(E_whole, w * (E0 + E1));
+  EXPECT_TRUE(g_whole == g_halves) << "largest difference " << (g_whole - g_halves).cwiseAbs().maxCoeff();
+  EXPECT_GT(E0, 0);
+  EXPECT_GT(E1, 0);
+  // Energy only: the same sum.
+  EXPECT_EQ(arap_energy(X, tm.T, rest, w, nullptr, nullptr),
+            w * (arap_energy_half(X, tm.T, rest, w, 0, nullptr) + arap_energy_half(X, tm.T, rest, w, 1, nullptr)));
+}
+
 TEST(Energies, AreaBarrierGradientHessianAndKnownValues) {
   Small s = small_mesh();
   SurfaceArapRest rest = SurfaceArapRest::build(s.X0, s.F);

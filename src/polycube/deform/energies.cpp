@@ -234,45 +234,58 @@ ArapRest ArapRest::build(const MatX3d& X, const MatX4i& T) {
   return r;
 }
 
+namespace {
+// The terms of tets [begin, end): sum_t w_t delta_t (unweighted); weight x their gradient into g,
+// weight x their Hessian into hess, delta_t into per_tet (each if given), tet after tet.
+double arap_range(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, int begin, int end,
+                  Eigen::VectorXd* g, HessianSink* hess, std::vector<double>* per_tet) {
+  double E = 0;
+  for (int t = begin; t < end; ++t) {
+    const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
+    Eigen::Matrix3d Ds;
+    for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
+    const Eigen::Matrix3d& Di = rest.Dm_inv[t];
+    const Eigen::Matrix3d Fm = Ds * Di;
+    const Eigen::Matrix3d R = closest_rotation(Fm);
+    const double delta = 0.5 * (Fm - R).squaredNorm();
+    if (per_tet) (*per_tet)[t] = delta;
+    E += rest.w[t] * delta;
+    const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
+    if (g) {
+      const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
+      for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
+    }
+    if (hess) {
+      const Eigen::Matrix4d K = B * B.transpose();
+      Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
+      for (int p = 0; p < 4; ++p)
+        for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
+      hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * rest.w[t] * H));
+    }
+  }
+  return E;
+}
+}  // namespace
+
+double arap_energy_half(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, int half,
+                        Eigen::VectorXd* grad) {
+  const int n = static_cast<int>(T.rows());
+  return half == 0 ? arap_range(X, T, rest, weight, 0, n / 2, grad, nullptr, nullptr)
+                   : arap_range(X, T, rest, weight, n / 2, n, grad, nullptr, nullptr);
+}
+
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
                    HessianSink* hess, std::vector<double>* per_tet) {
   if (per_tet) per_tet->resize(T.rows());
-  // Tets [begin, end): energy, gradient into g (if any), Hessian into hess (if any).
-  auto range = [&](int begin, int end, Eigen::VectorXd* g) {
-    double E = 0;
-    for (int t = begin; t < end; ++t) {
-      const int v[4] = {T(t, 0), T(t, 1), T(t, 2), T(t, 3)};
-      Eigen::Matrix3d Ds;
-      for (int m = 0; m < 3; ++m) Ds.col(m) = row(X, v[m + 1]) - row(X, v[0]);
-      const Eigen::Matrix3d& Di = rest.Dm_inv[t];
-      const Eigen::Matrix3d Fm = Ds * Di;
-      const Eigen::Matrix3d R = closest_rotation(Fm);
-      const double delta = 0.5 * (Fm - R).squaredNorm();
-      if (per_tet) (*per_tet)[t] = delta;
-      E += rest.w[t] * delta;
-      const Eigen::Matrix<double, 4, 3> B = shape_gradients(Di);
-      if (g) {
-        const Eigen::Matrix3d P = (Fm - R);  // dDelta/dF
-        for (int p = 0; p < 4; ++p) g->segment<3>(3 * v[p]) += weight * rest.w[t] * P * B.row(p).transpose();
-      }
-      if (hess) {
-        const Eigen::Matrix4d K = B * B.transpose();
-        Eigen::Matrix<double, 12, 12> H = Eigen::Matrix<double, 12, 12>::Zero();
-        for (int p = 0; p < 4; ++p)
-          for (int q = 0; q < 4; ++q) H.block<3, 3>(3 * p, 3 * q) = K(p, q) * Eigen::Matrix3d::Identity();
-        hess->add(v, 4, Eigen::Matrix<double, 12, 12>(weight * rest.w[t] * H));
-      }
-    }
-    return E;
-  };
   const int n = static_cast<int>(T.rows());
-  if (hess || n < 4000) return weight * range(0, n, grad);
-  // Energy and gradient only (every SQP iteration and line-search trial): split over two threads.
+  if (hess || n < kArapSplitTets) return weight * arap_range(X, T, rest, weight, 0, n, grad, hess, per_tet);
+  // Energy and gradient only (every SQP iteration and line-search trial): split over two threads,
+  // as arap_energy_half documents.
   Eigen::VectorXd g2;
   if (grad) g2 = Eigen::VectorXd::Zero(grad->size());
   double E2 = 0;
-  std::thread worker([&] { E2 = range(n / 2, n, grad ? &g2 : nullptr); });
-  const double E1 = range(0, n / 2, grad);
+  std::thread worker([&] { E2 = arap_range(X, T, rest, weight, n / 2, n, grad ? &g2 : nullptr, nullptr, per_tet); });
+  const double E1 = arap_range(X, T, rest, weight, 0, n / 2, grad, nullptr, per_tet);
   worker.join();
   if (grad) *grad += g2;
   return weight * (E1 + E2);

@@ -94,6 +94,18 @@ struct ArapRest {
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
                    HessianSink* hess, std::vector<double>* per_tet = nullptr);
 
+/// From this many tets on, arap_energy without a Hessian splits its tets in two halves, [0, n/2)
+/// and [n/2, n), on two threads: weight (E0 + E1), where the first half's gradient is added into
+/// grad tet after tet and the second half's is summed into a zeroed vector that is then added.
+constexpr int kArapSplitTets = 4000;
+
+/// One half (0 or 1) of that split: its energy sum_t w_t delta_t (not yet multiplied by weight),
+/// weight times its gradient added into grad (if given) tet after tet. For callers that run the
+/// halves on threads of their own in the same arithmetic (the SQP solver puts the second half
+/// beside the boundary terms, which end first).
+double arap_energy_half(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, int half,
+                        Eigen::VectorXd* grad);
+
 /// Rest-state data for the surface ARAP distortion (surface mode).
 struct SurfaceArapRest {
   /// Per triangle, row p: g_p, with F_t = sum_p x_p g_p^T the 3 x 3 Jacobian of the affine map
