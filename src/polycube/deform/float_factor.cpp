@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "polycube/core/memory.h"
 #include "polycube/core/parallel.h"
 
 namespace polycube::deform {
@@ -281,7 +282,15 @@ void FloatFactor::set_structure(const cholmod_factor* L) {
     const long nscol = super[s + 1] - super[s], nsrow = pi[s + 1] - pi[s];
     off_[s + 1] = off_[s] + (nsrow - nscol) * nscol + nscol * (nscol - 1) / 2;
   }
-  x_.resize(static_cast<size_t>(off_[nsuper]));
+  const size_t entries = static_cast<size_t>(off_[nsuper]);
+  if (x_.capacity() < entries) {
+    // In huge pages where the system has them (memory.h): written first here, the block is kept
+    // for the run (fandisk, 9.0M entries: the first copy took 0.10 s against 0.011 s later).
+    std::vector<float>().swap(x_);
+    x_.reserve(entries);
+    advise_huge_pages(x_.data(), entries * sizeof(float));
+  }
+  x_.resize(entries);
   dinv_.resize(n);
   max_rows_ = 0;
   for (int s = 0; s < nsuper; ++s) max_rows_ = std::max(max_rows_, pi[s + 1] - pi[s]);

@@ -3,8 +3,10 @@
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <cstring>
 
 #include "polycube/core/error.h"
+#include "polycube/core/memory.h"
 #include "polycube/core/parallel.h"
 
 namespace polycube::deform {
@@ -187,6 +189,17 @@ bool SparseSystem::factorize() {
     llt_->cholmod().print = 0;  // the library never prints
     llt_->analyzePattern(A_);
     analyzed_ = true;
+    // The factor's values, allocated here (as CHOLMOD's numeric factorization would) in huge pages
+    // and written once (not for the float factorization, which may never need them): in 4 KB pages the first factorization faulted each page of a block it
+    // then kept for the whole run (fandisk, 35.6k tets, 69 MB: first numeric factorization 0.45-0.56
+    // s against 0.22 s for the later ones; with this 0.20-0.21 s, and 0.01 s here).
+    if (cholmod_factor* L = llt_->factor(); L && L->is_super && L->xtype == CHOLMOD_PATTERN && !float_wanted_) {
+      {
+        const CholmodHugePages huge;
+        cholmod_change_factor(CHOLMOD_REAL, true, true, true, true, L, &llt_->cholmod());
+      }
+      if (L->x) std::memset(L->x, 0, L->xsize * sizeof(double));
+    }
     if (float_wanted_) float_factor_.analyze(llt_->factor(), A_.outerIndexPtr(), A_.innerIndexPtr());
   }
   if (float_wanted_ && float_factor_.analyzed()) {
