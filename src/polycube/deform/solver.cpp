@@ -336,10 +336,19 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   for (const FacePair& fp : p.pairs) elements.push_back({fp.a, fp.b, fp.c, fp.d});
   for (const ThicknessPair& tp : p.thickness) elements.push_back({tp.v, B(tp.f, 0), B(tp.f, 1), B(tp.f, 2)});
   SparseSystem sys(static_cast<int>(X.rows()), elements);
-  sys.cache_elements(elements);
-  // The ARAP Hessian G^T G is constant: assemble it once.
-  sys.set_zero();
-  p.distortion(X, nullptr, &sys);
+  // The symbolic analysis reads only the pattern: on the second thread while the elements'
+  // positions are cached and the constant ARAP Hessian G^T G is assembled (fandisk, 35.6k tets:
+  // 0.18-0.23 s beside 0.18 s).
+  sys.set_float_factorization(opt.float_factorization);
+  run_pair([&](int k) {
+    if (k == 1) {
+      sys.analyze();
+      return;
+    }
+    sys.cache_elements(elements);
+    sys.set_zero();
+    p.distortion(X, nullptr, &sys);
+  });
   const std::vector<double> arap_values = sys.values();
   std::vector<double> side_values(arap_values.size(), 0.0);  // the volume terms' Hessian (see evaluate)
   SparseSystem::Buffer side(sys, side_values);

@@ -180,28 +180,33 @@ void factorization_blas_threads() {
 }
 }  // namespace
 
+void SparseSystem::analyze() {
+  if (analyzed_) return;
+  const SerialOpenMP serial_openmp;
+  llt_ = std::make_unique<CholmodLLT>();
+  llt_->setMode(Eigen::CholmodAuto);
+  llt_->cholmod().print = 0;  // the library never prints
+  llt_->analyzePattern(A_);  // (the pattern only; factorize_double copies the values)
+  analyzed_ = true;
+  // The factor's values, allocated here (as CHOLMOD's numeric factorization would) in huge pages
+  // and written once (not for the float factorization, which may never need them): in 4 KB pages
+  // the first factorization faulted each page of a block it then kept for the whole run (fandisk,
+  // 35.6k tets, 69 MB: first numeric factorization 0.45-0.56 s against 0.22 s for the later ones;
+  // with this 0.20-0.21 s, and 0.01 s here).
+  if (cholmod_factor* L = llt_->factor(); L && L->is_super && L->xtype == CHOLMOD_PATTERN && !float_wanted_) {
+    {
+      const CholmodHugePages huge;
+      cholmod_change_factor(CHOLMOD_REAL, true, true, true, true, L, &llt_->cholmod());
+    }
+    if (L->x) std::memset(L->x, 0, L->xsize * sizeof(double));
+  }
+  if (float_wanted_) float_factor_.analyze(llt_->factor(), A_.outerIndexPtr(), A_.innerIndexPtr());
+}
+
 bool SparseSystem::factorize() {
   factorization_blas_threads();
   const SerialOpenMP serial_openmp;
-  if (!analyzed_) {  // (the pattern only; factorize_double copies the values)
-    llt_ = std::make_unique<CholmodLLT>();
-    llt_->setMode(Eigen::CholmodAuto);
-    llt_->cholmod().print = 0;  // the library never prints
-    llt_->analyzePattern(A_);
-    analyzed_ = true;
-    // The factor's values, allocated here (as CHOLMOD's numeric factorization would) in huge pages
-    // and written once (not for the float factorization, which may never need them): in 4 KB pages the first factorization faulted each page of a block it
-    // then kept for the whole run (fandisk, 35.6k tets, 69 MB: first numeric factorization 0.45-0.56
-    // s against 0.22 s for the later ones; with this 0.20-0.21 s, and 0.01 s here).
-    if (cholmod_factor* L = llt_->factor(); L && L->is_super && L->xtype == CHOLMOD_PATTERN && !float_wanted_) {
-      {
-        const CholmodHugePages huge;
-        cholmod_change_factor(CHOLMOD_REAL, true, true, true, true, L, &llt_->cholmod());
-      }
-      if (L->x) std::memset(L->x, 0, L->xsize * sizeof(double));
-    }
-    if (float_wanted_) float_factor_.analyze(llt_->factor(), A_.outerIndexPtr(), A_.innerIndexPtr());
-  }
+  analyze();
   if (float_wanted_ && float_factor_.analyzed()) {
     // A pivot that is not positive in float: once more with 100 times the shift, then, if that
     // fails too, the double factorization from then on (with a diagonal shifted further, a float

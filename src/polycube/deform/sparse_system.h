@@ -60,6 +60,11 @@ class SparseSystem : public HessianSink {
   void add_diagonal(double mu);
   double mean_diagonal() const;
 
+  /// The symbolic analysis (fill-reducing ordering, supernodes), which factorize() otherwise makes
+  /// on its first call. It reads only the pattern, so it may run on another thread while the
+  /// elements are cached (cache_elements) and values added; no other call meanwhile. Call
+  /// set_float_factorization first. Once only: later calls do nothing.
+  void analyze();
   /// Numeric factorization (symbolic analysis on first call). False if not positive definite.
   /// With set_float_factorization(true) and a supernodal analysis, the factorization is made in
   /// single precision (FloatFactor::factorize) and CHOLMOD's double one only where a float pivot
