@@ -1,5 +1,5 @@
 // Large blocks backed by transparent huge pages (2 MB) where the kernel offers them, for CHOLMOD's
-// factors in the polycube realization.
+// factors in the polycube realization and the deformation's factor.
 //
 // The realization factorizes afresh at each coupled Newton step (CHOLMOD allocates a new factor,
 // tens to hundreds of MB, and frees it after), and every 4 KB page of a fresh block faults when
@@ -11,9 +11,11 @@
 // (another kernel setting, another OS) nothing changes, and the contents and arithmetic are the
 // same.
 //
-// Not used for the deformation's SQP solver, which keeps one factor for the whole run: there
-// rocker's page faults fell 404k -> 68k with huge pages, but its assembly and line search measured
-// 1-5 s slower in five of five pairs of runs (the cause not found), so the gain did not show.
+// The deformation's SQP solver, which keeps one factor for the whole run, takes huge pages for
+// that factor's values and its float copy only (SparseSystem::analyze; fifty-fifth session: rocker's
+// page faults 404k -> 227k, fandisk's first factorization 0.45-0.56 -> 0.20-0.21 s). With all of
+// CHOLMOD's blocks in huge pages there, rocker's page faults fell 404k -> 68k but its assembly and
+// line search measured 1-5 s slower in five of five pairs of runs (the cause not found).
 #pragma once
 #include <cstddef>
 
