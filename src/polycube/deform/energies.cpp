@@ -265,13 +265,19 @@ double arap_range(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double
   }
   return E;
 }
+
+// Half 0 or 1 of the split that arap_energy_half documents.
+double arap_half(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, int half,
+                 Eigen::VectorXd* g, std::vector<double>* per_tet) {
+  const int n = static_cast<int>(T.rows());
+  return half == 0 ? arap_range(X, T, rest, weight, 0, n / 2, g, nullptr, per_tet)
+                   : arap_range(X, T, rest, weight, n / 2, n, g, nullptr, per_tet);
+}
 }  // namespace
 
 double arap_energy_half(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, int half,
                         Eigen::VectorXd* grad) {
-  const int n = static_cast<int>(T.rows());
-  return half == 0 ? arap_range(X, T, rest, weight, 0, n / 2, grad, nullptr, nullptr)
-                   : arap_range(X, T, rest, weight, n / 2, n, grad, nullptr, nullptr);
+  return arap_half(X, T, rest, weight, half, grad, nullptr);
 }
 
 double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, double weight, Eigen::VectorXd* grad,
@@ -287,9 +293,9 @@ double arap_energy(const MatX3d& X, const MatX4i& T, const ArapRest& rest, doubl
   double E1 = 0, E2 = 0;
   run_pair([&](int k) {
     if (k == 0)
-      E1 = arap_range(X, T, rest, weight, 0, n / 2, grad, nullptr, per_tet);
+      E1 = arap_half(X, T, rest, weight, 0, grad, per_tet);
     else
-      E2 = arap_range(X, T, rest, weight, n / 2, n, grad ? &g2 : nullptr, nullptr, per_tet);
+      E2 = arap_half(X, T, rest, weight, 1, grad ? &g2 : nullptr, per_tet);
   });
   if (grad) *grad += g2;
   return weight * (E1 + E2);
