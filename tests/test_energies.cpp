@@ -323,6 +323,29 @@ TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
   EXPECT_NEAR(E(squashed(0.3), nullptr, nullptr), 0.7 * w * (r - 1 - std::log(r)), 1e-12);
   EXPECT_NEAR(crushed_fraction(squashed(0.3), plate.F, pairs, keep), w, 1e-12);
   EXPECT_TRUE(std::isinf(E(squashed(0.0), nullptr, nullptr)));  // folded flat
+  // Gaps across (pair_gap, flattened_parts): at rest 0.04 for every pair; pressed to 60% not
+  // flattened, to 30% flattened (ratio 0.3); pressed to 30% with the top face slid 0.1 along x, each
+  // pair is farther apart than half its rest distance (sqrt(0.012^2 + 0.1^2)), which the barrier's
+  // plain distance takes for open, while the gap across says 0.3; turned inside out (the top
+  // below the bottom), the ratio is negative.
+  for (const ThicknessPair& p : pairs) EXPECT_NEAR(pair_gap(plate.V, plate.F, p), 0.04, 1e-12);
+  const Flattened none = flattened_parts(plate.V, squashed(0.6), plate.F, pairs, keep);
+  EXPECT_EQ(none.fraction, 0.0);
+  EXPECT_EQ(none.vertex, -1);
+  const Flattened pressed = flattened_parts(plate.V, squashed(0.3), plate.F, pairs, keep);
+  EXPECT_NEAR(pressed.fraction, w, 1e-12);
+  EXPECT_NEAR(pressed.ratio, 0.3, 1e-12);
+  EXPECT_GE(pressed.vertex, 0);
+  MatX3d slid = squashed(0.3);
+  for (int v = 0; v < slid.rows(); ++v)
+    if (plate.V(v, 2) == 0.04) slid(v, 0) += 0.1;
+  EXPECT_EQ(crushed_fraction(slid, plate.F, pairs, keep), 0.0);
+  EXPECT_EQ(E(slid, nullptr, nullptr), 0.0);
+  for (const ThicknessPair& p : pairs) EXPECT_NEAR(pair_gap(slid, plate.F, p), 0.012, 1e-12);
+  const Flattened slid_flat = flattened_parts(plate.V, slid, plate.F, pairs, keep);
+  EXPECT_NEAR(slid_flat.fraction, w, 1e-12);
+  EXPECT_NEAR(slid_flat.ratio, 0.3, 1e-12);
+  EXPECT_LT(flattened_parts(plate.V, squashed(-0.5), plate.F, pairs, keep).ratio, 0.0);
   // Gradient and Gauss-Newton Hessian in the active range, jittered.
   MatX3d X = squashed(0.3);
   std::mt19937 rng(3);

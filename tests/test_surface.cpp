@@ -66,6 +66,17 @@ TEST(SurfaceDeform, CubeStaysACube) {
   EXPECT_NEAR(r.arap, 0, 1e-12);
 }
 
+// A thin plate is already a polycube: nothing moves and nothing is pressed flat, though its
+// faces' vertices have their pairs across (deform::flattened_parts measured at the end).
+TEST(SurfaceDeform, ThinPlateIsNotReportedFlattened) {
+  auto b = grid_box(4, Vec3(0, 0, 0), Vec3(1, 1, 0.04));
+  auto r = deform::deform_surface_to_polycube(b.V, b.F, {});
+  EXPECT_EQ(r.iterations, 0);
+  EXPECT_EQ(r.thin_flattened.fraction, 0.0);
+  EXPECT_EQ(r.thin_flattened.vertex, -1);
+  EXPECT_FALSE(deform::thickness_pairs(b.V, b.F, 0.05 * std::sqrt(2.0)).empty());
+}
+
 TEST(SurfaceDeform, SphereBecomesASixChartPolycube) {
   auto s = sphere(4, Vec3(5, -3, 2), 4.0);
   auto r = deform::deform_surface_to_polycube(s.V, s.F, {});

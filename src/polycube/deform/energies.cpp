@@ -595,6 +595,32 @@ double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<Thic
   return c;
 }
 
+double pair_gap(const MatX3d& X, const MatX3i& F, const ThicknessPair& p) {
+  const Vec3 N = area_normal(X, F(p.f, 0), F(p.f, 1), F(p.f, 2));
+  const double A = N.norm();
+  if (!(A > 0)) return 0;
+  // across() points from the point across to v: against f's outward normal across a part, along
+  // it across a gap outside.
+  return (p.exterior ? 1.0 : -1.0) * across(X, F, p).dot(N) / A;
+}
+
+Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
+                          double keep) {
+  Flattened out;
+  for (const ThicknessPair& p : pairs) {
+    const double rest = pair_gap(R, F, p);
+    if (!(rest >= 0.5 * across(R, F, p).norm()) || !(rest > 0)) continue;
+    const double ratio = pair_gap(X, F, p) / rest;
+    if (!(ratio < keep)) continue;
+    out.fraction += p.w;
+    if (out.vertex < 0 || ratio < out.ratio) {
+      out.vertex = p.v;
+      out.ratio = ratio;
+    }
+  }
+  return out;
+}
+
 double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep,
                         double weight, Eigen::VectorXd* grad, HessianSink* hess) {
   double E = 0;

@@ -166,6 +166,26 @@ std::vector<ThicknessPair> thickness_pairs(const MatX3d& X, const MatX3i& F, dou
 /// no longer on v's outer side).
 double crushed_fraction(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep);
 
+/// Gap of pair p in X along the unit normal of its triangle across: the distance from v to the
+/// plane of f, positive on the side of the part's inside (exterior pairs: of the gap outside),
+/// negative once v has passed through that plane (0 if f has no area). Unlike the plain distance
+/// that crushed_fraction and thickness_energy measure, it does not stay large when the part's two
+/// sides slide along each other as it is pressed flat: cow's hind legs in surface mode came out
+/// of the deformation as plates 0.001 thick (0.033 across at rest) with every pair at half its
+/// rest distance or more, the two sides shifted along the plate (2026-12-07).
+double pair_gap(const MatX3d& X, const MatX3i& F, const ThicknessPair& p);
+
+/// Thin parts pressed flat in X: the pairs whose gap (pair_gap) is under `keep` x their gap at
+/// rest R (pairs whose rest gap is under half their rest distance, across a triangle that leans
+/// too far for its plane to measure the gap, are left out).
+struct Flattened {
+  double fraction = 0;  ///< area fraction (sum of w) of those pairs
+  int vertex = -1;      ///< v of the pair with the smallest gap ratio among them (-1: none)
+  double ratio = 1;     ///< that pair's gap in X over its gap at rest
+};
+Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
+                          double keep);
+
 /// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with
 /// phi(r) = r - 1 - log r for r < 1 and 0 above: zero while the part keeps at least `keep` of its
 /// rest thickness, +inf when its two sides meet. C1 at r = 1, convex in r. Hessian: Gauss-Newton

@@ -639,6 +639,13 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.seconds = clock.seconds();
   res.thickness_pairs = static_cast<int>(p.thickness.size());
   if (!p.thickness.empty()) res.thin_crushed_after = crushed_fraction(X, B, p.thickness, opt.thickness_keep);
+  if (p.surface && p.border.empty()) {
+    const MatX3d rest = (V.rowwise() - centre) / scale;
+    const std::vector<ThicknessPair> built =
+        p.thickness.empty() && watch.empty() ? thickness_pairs(rest, B, opt.thickness_max) : std::vector<ThicknessPair>{};
+    res.thin_flattened = flattened_parts(rest, X, B, !p.thickness.empty() ? p.thickness : !watch.empty() ? watch : built,
+                                         opt.thickness_keep);
+  }
   res.factorizations = factorizations;
   res.float_factorizations = sys.float_factorizations();
   res.volume_barrier_weight = p.volume_weight;

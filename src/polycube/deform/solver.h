@@ -218,6 +218,10 @@ struct DeformResult {
   double thin_crushed = 0;
   /// The same fraction at the end, over the pairs the barrier kept (0 without the barrier).
   double thin_crushed_after = 0;
+  /// Surface mode, closed surfaces: the thin parts pressed flat at the end, their gaps measured
+  /// across (flattened_parts with thickness_keep): what the barrier's distances miss when the two
+  /// sides slide along each other. vertex: of V, the pair's farthest pressed (-1: none).
+  Flattened thin_flattened;
   /// Stall rescue (DeformOptions::rescue_cg_tolerance): the first run's l1_quality when it ran
   /// (-1: not needed or off), and whether its result was kept.
   double rescue_from_quality = -1;

@@ -630,6 +630,27 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"max_inner_iterations", opt.deform.max_inner_iterations},
                        {"target_quality", opt.deform.target_quality},
                        {"sqp_tolerance", opt.deform.sqp_tolerance_for(opt.surface)}};
+      if (opt.surface && input_closed) {
+        // Thin parts the surface deformation pressed flat (their gap across measured along the
+        // normal, deform::flattened_parts): the polycube flattens or loses them (cow's hind legs).
+        const deform::Flattened& fl = dr.thin_flattened;
+        json at = nullptr;
+        if (fl.vertex >= 0 && fl.vertex < tm.V.rows())
+          at = {tm.V(fl.vertex, 0), tm.V(fl.vertex, 1), tm.V(fl.vertex, 2)};
+        pj["thin_flattened"] = {{"fraction", fl.fraction}, {"thinnest_ratio", fl.ratio}, {"at", at}};
+        if (fl.fraction > opt.deform.thickness_retry_above && fl.vertex >= 0) {
+          std::ostringstream os;
+          os << "the surface deformation pressed thin parts flat: " << 100 * fl.fraction
+             << "% of the area lies on parts whose two sides came within " << opt.deform.thickness_keep
+             << " of their rest gap across; the worst, where they "
+             << (fl.ratio > 0 ? "are " + std::to_string(fl.ratio) + " of it apart," : std::string("crossed,"))
+             << " near the input's point (" << tm.V(fl.vertex, 0) << ", " << tm.V(fl.vertex, 1) << ", "
+             << tm.V(fl.vertex, 2)
+             << "): the polycube flattens or loses such parts (the volume pipeline, --quad without --surface, "
+                "deforms the inside too and usually keeps them)";
+          hooks.warn(os.str());
+        }
+      }
       report["polycube"] = pj;
       if (dr.inverted > 0)
         throw Error(ErrorKind::Internal, "the deformation produced " + std::to_string(dr.inverted) + " inverted tets");
