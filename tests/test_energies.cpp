@@ -336,6 +336,16 @@ TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
   EXPECT_NEAR(pressed.fraction, w, 1e-12);
   EXPECT_NEAR(pressed.ratio, 0.3, 1e-12);
   EXPECT_GE(pressed.vertex, 0);
+  ASSERT_FALSE(pressed.places.empty());
+  EXPECT_EQ(pressed.places.front(), pressed.vertex);
+  EXPECT_LE(static_cast<int>(pressed.places.size()), 5);
+  for (size_t a = 0; a < pressed.places.size(); ++a)  // each place 0.1 or more from the others
+    for (size_t b = a + 1; b < pressed.places.size(); ++b)
+      EXPECT_GT((plate.V.row(pressed.places[a]) - plate.V.row(pressed.places[b])).norm(), 0.1);
+  // The plate pressed all over: several places across its 1 x 1 faces, none with a larger spacing
+  // than the plate allows.
+  EXPECT_GE(pressed.places.size(), 2u);
+  EXPECT_EQ(flattened_parts(plate.V, squashed(0.3), plate.F, pairs, keep, 2.0).places.size(), 1u);
   MatX3d slid = squashed(0.3);
   for (int v = 0; v < slid.rows(); ++v)
     if (plate.V(v, 2) == 0.04) slid(v, 0) += 0.1;

@@ -497,6 +497,16 @@ TEST(RealSurfaceOrganic, CowsHindLegsAreReportedPressedFlat) {
   // A hind leg: the cow's x spans +-0.52 (head at +x), y +-0.32 (hooves at -y).
   EXPECT_LT(f["at"][0].get<double>(), -0.2) << f.dump();
   EXPECT_LT(f["at"][1].get<double>(), -0.15) << f.dump();
+  // Other places apart from it (2026-12-07: the head's tip, both ears and the tail besides the hoof).
+  const auto& places = f["places"];
+  ASSERT_GE(places.size(), 2u) << f.dump();
+  EXPECT_EQ(places[0], f["at"]);
+  for (size_t a = 0; a < places.size(); ++a)
+    for (size_t b = a + 1; b < places.size(); ++b) {
+      double d2 = 0;
+      for (int k = 0; k < 3; ++k) d2 += std::pow(places[a][k].get<double>() - places[b][k].get<double>(), 2);
+      EXPECT_GT(std::sqrt(d2), 0.1 * 1.2711) << f.dump();  // spacing: 0.1 of the diagonal
+    }
 }
 
 // organic/blub in surface mode: the surface ARAP flattens its tail fin into a sheet whose edges are

@@ -605,18 +605,27 @@ double pair_gap(const MatX3d& X, const MatX3i& F, const ThicknessPair& p) {
 }
 
 Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
-                          double keep) {
+                          double keep, double spacing, int max_places) {
   Flattened out;
+  std::vector<std::pair<double, int>> pressed;  // (ratio, v), for the places
   for (const ThicknessPair& p : pairs) {
     const double rest = pair_gap(R, F, p);
     if (!(rest >= 0.5 * across(R, F, p).norm()) || !(rest > 0)) continue;
     const double ratio = pair_gap(X, F, p) / rest;
     if (!(ratio < keep)) continue;
     out.fraction += p.w;
+    pressed.emplace_back(ratio, p.v);
     if (out.vertex < 0 || ratio < out.ratio) {
       out.vertex = p.v;
       out.ratio = ratio;
     }
+  }
+  std::stable_sort(pressed.begin(), pressed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  for (const auto& [ratio, v] : pressed) {
+    if (static_cast<int>(out.places.size()) >= max_places) break;
+    bool apart = true;
+    for (int u : out.places) apart = apart && (R.row(v) - R.row(u)).norm() > spacing;
+    if (apart) out.places.push_back(v);
   }
   return out;
 }

@@ -182,9 +182,12 @@ struct Flattened {
   double fraction = 0;  ///< area fraction (sum of w) of those pairs
   int vertex = -1;      ///< v of the pair with the smallest gap ratio among them (-1: none)
   double ratio = 1;     ///< that pair's gap in X over its gap at rest
+  /// The places pressed: v of the worst pair, then of the next worst farther than `spacing` (at
+  /// rest) from those already listed, and so on, at most `max_places` (cow: both hind legs).
+  std::vector<int> places;
 };
 Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
-                          double keep);
+                          double keep, double spacing = 0.1, int max_places = 5);
 
 /// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with
 /// phi(r) = r - 1 - log r for r < 1 and 0 above: zero while the part keeps at least `keep` of its

@@ -637,7 +637,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         json at = nullptr;
         if (fl.vertex >= 0 && fl.vertex < tm.V.rows())
           at = {tm.V(fl.vertex, 0), tm.V(fl.vertex, 1), tm.V(fl.vertex, 2)};
-        pj["thin_flattened"] = {{"fraction", fl.fraction}, {"thinnest_ratio", fl.ratio}, {"at", at}};
+        json places = json::array();
+        for (int v : fl.places)
+          if (v >= 0 && v < tm.V.rows()) places.push_back({tm.V(v, 0), tm.V(v, 1), tm.V(v, 2)});
+        pj["thin_flattened"] = {{"fraction", fl.fraction}, {"thinnest_ratio", fl.ratio}, {"at", at}, {"places", places}};
         if (fl.fraction > opt.deform.thickness_retry_above && fl.vertex >= 0) {
           std::ostringstream os;
           os << "the surface deformation pressed thin parts flat: " << 100 * fl.fraction
@@ -645,8 +648,11 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
              << " of their rest gap across; the worst, where they "
              << (fl.ratio > 0 ? "are " + std::to_string(fl.ratio) + " of it apart," : std::string("crossed,"))
              << " near the input's point (" << tm.V(fl.vertex, 0) << ", " << tm.V(fl.vertex, 1) << ", "
-             << tm.V(fl.vertex, 2)
-             << "): the polycube flattens or loses such parts (the volume pipeline, --quad without --surface, "
+             << tm.V(fl.vertex, 2) << ")"
+             << (fl.places.size() > 1 ? " (" + std::to_string(fl.places.size()) +
+                                            " places apart, in the report's polycube.thin_flattened.places)"
+                                      : std::string())
+             << ": the polycube flattens or loses such parts (the volume pipeline, --quad without --surface, "
                 "deforms the inside too and usually keeps them)";
           hooks.warn(os.str());
         }
