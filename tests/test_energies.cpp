@@ -331,13 +331,13 @@ TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
   for (const ThicknessPair& p : pairs) EXPECT_NEAR(pair_gap(plate.V, plate.F, p), 0.04, 1e-12);
   const Flattened none = flattened_parts(plate.V, squashed(0.6), plate.F, pairs, keep);
   EXPECT_EQ(none.fraction, 0.0);
-  EXPECT_EQ(none.vertex, -1);
+  EXPECT_EQ(none.vertex(), -1);
   const Flattened pressed = flattened_parts(plate.V, squashed(0.3), plate.F, pairs, keep);
   EXPECT_NEAR(pressed.fraction, w, 1e-12);
   EXPECT_NEAR(pressed.ratio, 0.3, 1e-12);
-  EXPECT_GE(pressed.vertex, 0);
+  EXPECT_GE(pressed.vertex(), 0);
   ASSERT_FALSE(pressed.places.empty());
-  EXPECT_EQ(pressed.places.front(), pressed.vertex);
+  EXPECT_EQ(pressed.places.front(), pressed.vertex());
   EXPECT_LE(static_cast<int>(pressed.places.size()), 5);
   for (size_t a = 0; a < pressed.places.size(); ++a)  // each place 0.1 or more from the others
     for (size_t b = a + 1; b < pressed.places.size(); ++b)

@@ -73,7 +73,7 @@ TEST(SurfaceDeform, ThinPlateIsNotReportedFlattened) {
   auto r = deform::deform_surface_to_polycube(b.V, b.F, {});
   EXPECT_EQ(r.iterations, 0);
   EXPECT_EQ(r.thin_flattened.fraction, 0.0);
-  EXPECT_EQ(r.thin_flattened.vertex, -1);
+  EXPECT_EQ(r.thin_flattened.vertex(), -1);
   EXPECT_FALSE(deform::thickness_pairs(b.V, b.F, 0.05 * std::sqrt(2.0)).empty());
 }
 

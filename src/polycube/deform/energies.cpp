@@ -615,12 +615,9 @@ Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, con
     if (!(ratio < keep)) continue;
     out.fraction += p.w;
     pressed.emplace_back(ratio, p.v);
-    if (out.vertex < 0 || ratio < out.ratio) {
-      out.vertex = p.v;
-      out.ratio = ratio;
-    }
   }
   std::stable_sort(pressed.begin(), pressed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  if (!pressed.empty()) out.ratio = pressed.front().first;
   for (const auto& [ratio, v] : pressed) {
     if (static_cast<int>(out.places.size()) >= max_places) break;
     bool apart = true;

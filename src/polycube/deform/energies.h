@@ -180,11 +180,13 @@ double pair_gap(const MatX3d& X, const MatX3i& F, const ThicknessPair& p);
 /// too far for its plane to measure the gap, are left out).
 struct Flattened {
   double fraction = 0;  ///< area fraction (sum of w) of those pairs
-  int vertex = -1;      ///< v of the pair with the smallest gap ratio among them (-1: none)
-  double ratio = 1;     ///< that pair's gap in X over its gap at rest
+  double ratio = 1;     ///< the smallest gap ratio among them: gap in X over gap at rest
   /// The places pressed: v of the worst pair, then of the next worst farther than `spacing` (at
-  /// rest) from those already listed, and so on, at most `max_places` (cow: both hind legs).
+  /// rest) from those already listed, and so on, at most `max_places` (cow: a hind hoof, the head's
+  /// tip, both ears, the tail).
   std::vector<int> places;
+  /// v of the worst pair (-1: none).
+  int vertex() const { return places.empty() ? -1 : places.front(); }
 };
 Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
                           double keep, double spacing = 0.1, int max_places = 5);

@@ -220,8 +220,8 @@ struct DeformResult {
   double thin_crushed_after = 0;
   /// Surface mode, closed surfaces: the thin parts pressed flat at the end, their gaps measured
   /// across (flattened_parts with thickness_keep): what the barrier's distances miss when the two
-  /// sides slide along each other. vertex: of V, the pair's farthest pressed (-1: none); places:
-  /// up to five, at least 0.1 of the bounding-box diagonal apart.
+  /// sides slide along each other. places: vertices of V, worst first, up to five, at least 0.1 of
+  /// the bounding-box diagonal apart.
   Flattened thin_flattened;
   /// Stall rescue (DeformOptions::rescue_cg_tolerance): the first run's l1_quality when it ran
   /// (-1: not needed or off), and whether its result was kept.

@@ -634,21 +634,21 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
         // Thin parts the surface deformation pressed flat (their gap across measured along the
         // normal, deform::flattened_parts): the polycube flattens or loses them (cow's hind legs).
         const deform::Flattened& fl = dr.thin_flattened;
-        json at = nullptr;
-        if (fl.vertex >= 0 && fl.vertex < tm.V.rows())
-          at = {tm.V(fl.vertex, 0), tm.V(fl.vertex, 1), tm.V(fl.vertex, 2)};
         json places = json::array();
-        for (int v : fl.places)
-          if (v >= 0 && v < tm.V.rows()) places.push_back({tm.V(v, 0), tm.V(v, 1), tm.V(v, 2)});
-        pj["thin_flattened"] = {{"fraction", fl.fraction}, {"thinnest_ratio", fl.ratio}, {"at", at}, {"places", places}};
-        if (fl.fraction > opt.deform.thickness_retry_above && fl.vertex >= 0) {
+        for (int v : fl.places) places.push_back({tm.V(v, 0), tm.V(v, 1), tm.V(v, 2)});
+        pj["thin_flattened"] = {{"fraction", fl.fraction},
+                                {"thinnest_ratio", fl.ratio},
+                                {"at", places.empty() ? json(nullptr) : places.front()},
+                                {"places", places}};
+        if (fl.fraction > opt.deform.thickness_retry_above && !fl.places.empty()) {
+          const int worst = fl.vertex();
           std::ostringstream os;
           os << "the surface deformation pressed thin parts flat: " << 100 * fl.fraction
              << "% of the area lies on parts whose two sides came within " << opt.deform.thickness_keep
              << " of their rest gap across; the worst, where they "
              << (fl.ratio > 0 ? "are " + std::to_string(fl.ratio) + " of it apart," : std::string("crossed,"))
-             << " near the input's point (" << tm.V(fl.vertex, 0) << ", " << tm.V(fl.vertex, 1) << ", "
-             << tm.V(fl.vertex, 2) << ")"
+             << " near the input's point (" << tm.V(worst, 0) << ", " << tm.V(worst, 1) << ", "
+             << tm.V(worst, 2) << ")"
              << (fl.places.size() > 1 ? " (" + std::to_string(fl.places.size()) +
                                             " places apart, in the report's polycube.thin_flattened.places)"
                                       : std::string())
