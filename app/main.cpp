@@ -386,6 +386,12 @@ int main(int argc, char** argv) {
       ->capture_default_str()->check(CLI::Range(0, 10000));
   int fit_rounds = hx.fit.rounds;
   double fit_floor = hx.fit.quality_floor;
+  double fit_offset = hx.fit.max_offset;
+  app.add_option("--fit-offset", fit_offset,
+                 "Hex mesh: the fitting may take a boundary vertex off the input surface by up to this fraction "
+                 "of its edge length (0 = on the surface), so that flat quads over curved parts cut the surface "
+                 "on both sides (mean distance about a third lower)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0));
   app.add_option("--fit-rounds", fit_rounds,
                  "Hex and quad meshes: rounds of fitting to the input surface (boundary vertices slide on it "
                  "so that it comes closer to the mesh; 0 = off)")
@@ -463,6 +469,7 @@ int main(int argc, char** argv) {
   if (app.count("--grading") > 0) opt.quad.grading = hx.grading;
   hx.fit.rounds = opt.quad.fit.rounds = fit_rounds;
   hx.fit.quality_floor = opt.quad.fit.quality_floor = fit_floor;
+  hx.fit.max_offset = fit_offset;  // not for quads: their later passes assume vertices on the surface
   // A resolution given alone asks for that mesh: --quads N runs to the quads, --hexes / --hex-size
   // to the hexes.
   if (!run_hex && !run_quad && app.count("--until") == 0) {

@@ -6,6 +6,7 @@
 #include "polycube/chart/labeling.h"
 #include "polycube/core/error.h"
 #include "polycube/core/topology.h"
+#include "polycube/geometry/closest_point.h"
 #include "polycube/examples/examples.h"
 #include "polycube/geometry/tet_locator.h"
 #include "polycube/hex/extract.h"
@@ -693,6 +694,29 @@ TEST(Hex, GradedGridFollowsTheCurvedPart) {
   EXPECT_LT(boundary_distance(graded, target), 0.8 * boundary_distance(uniform, target));
   EXPECT_DOUBLE_EQ(uniform.grading_max_slope[0], 0.0);
   EXPECT_GT(graded.grading_max_slope[0], graded.grading_min_slope[0]);
+
+  // Boundary vertices allowed off the surface (HexOptions::fit.max_offset): the flat quads over the
+  // bend cut it on both sides, the distances shrink, no hex inverts.
+  o.grading.strength = 0;
+  o.fit.max_offset = 0.3;
+  const hex::HexResult off = hex::hex_mesh_from_polycube(rest, tm.T, tm.V, tm.boundary, labels, &target, o);
+  EXPECT_EQ(off.quality.inverted, 0);
+  ASSERT_EQ(off.H.rows(), uniform.H.rows());
+  auto distances = [&](const hex::HexResult& r) {
+    return hex::hausdorff(r.V, hex::triangulate_quads(hex::boundary_quads(r.H)), target.V, target.F, 50000);
+  };
+  const hex::Hausdorff on_surface = distances(uniform), off_surface = distances(off);
+  EXPECT_LT(off_surface.mean(), 0.8 * on_surface.mean());
+  EXPECT_LE(off_surface.max, on_surface.max);
+  // Vertices do leave the surface (outwards over the convex side of the bend), by under 0.3 cell.
+  const geometry::TriangleTree tree(target.V, target.F);
+  const MatX4i Qb = hex::boundary_quads(off.H);
+  double farthest = 0;
+  for (int q = 0; q < Qb.rows(); ++q)
+    for (int j = 0; j < 4; ++j)
+      farthest = std::max(farthest, std::sqrt(tree.closest(off.V.row(Qb(q, j)).transpose()).dist2));
+  EXPECT_GT(farthest, 1e-3);
+  EXPECT_LT(farthest, 0.3 * 1.5 / 3);  // cells of 1/3 stretched by at most 1.5 over the bend
 }
 
 TEST(Hex, ACreaseNoGridLineFollowsIsCaptured) {

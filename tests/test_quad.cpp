@@ -402,6 +402,57 @@ TEST(SurfaceFit, AnUnevenRingOnATubeEvensOutToTheBestChords) {
   EXPECT_GT(quad::quad_quality(r.V, r.Q).sj_min, 0.5);
 }
 
+TEST(SurfaceFit, VerticesOffTheSurfaceHalveTheChordsDepth) {
+  // Eight equal chords round the unit tube, their corners on it: each cuts 1 - cos 22.5 deg under
+  // the tube, which no vertex on the surface can improve. With the corners allowed off the surface
+  // they move out to the radius R where the corners' distance R - 1 equals the chords' depth
+  // 1 - R cos 22.5, R = 2 / (1 + cos 22.5): about half the depth either way.
+  const SurfaceMesh s = tube(360, 4);
+  const geometry::TriangleTree tree(s.V, s.F);
+  const double c = std::cos(22.5 * M_PI / 180), on = 1 - c, R = 2 / (1 + c), off = R - 1;
+  auto even_ring = [] {
+    Ring r = uneven_ring();
+    for (int i = 0; i < 8; ++i) {
+      const double t = i * M_PI / 4;
+      r.V.row(i) << std::cos(t), std::sin(t), 0;
+      r.V.row(8 + i) << std::cos(t), std::sin(t), 1;
+    }
+    return r;
+  };
+  geometry::SurfaceFitOptions o;
+  o.rounds = 60;
+  o.quality_floor = 0.5;
+  Ring kept = even_ring();
+  const geometry::SurfaceFitStats k =
+      geometry::fit_to_surface(kept.V, kept.Q, s, tree, std::vector<char>(16, 1), nullptr,
+                               [&](int v) { return kept.worst(v); }, o);
+  EXPECT_NEAR(k.max_after, on, 2e-3);  // on the surface: the chords' depth stays
+  o.max_offset = 0.5;
+  Ring r = even_ring();
+  const geometry::SurfaceFitStats st = geometry::fit_to_surface(r.V, r.Q, s, tree, std::vector<char>(16, 1), nullptr,
+                                                                [&](int v) { return r.worst(v); }, o);
+  EXPECT_NEAR(st.max_before, on, 2e-3);
+  EXPECT_GT(st.moves, 0);
+  EXPECT_LT(st.max_after, 1.1 * off);
+  EXPECT_GT(st.max_after, off - 2e-3);  // none can do better (up to the tube's facets)
+  EXPECT_LT(st.mean_after, st.mean_before);
+  const double len = 0.5 * (2 * std::sin(M_PI / 8) + 1);  // a vertex's mean quad edge: a chord and a height
+  for (int v = 0; v < 16; ++v) {
+    const double rad = std::hypot(r.V(v, 0), r.V(v, 1));
+    EXPECT_GT(rad, 1 + 0.5 * off) << v;  // out, not in
+    EXPECT_LT(rad, 1 + 1.1 * off) << v;
+    EXPECT_LE(rad - 1, o.max_offset * len + 1e-4) << v;
+  }
+  EXPECT_GT(quad::quad_quality(r.V, r.Q).sj_min, 0.5);
+  // With a tight limit the corners stop at it.
+  o.max_offset = 0.01;
+  Ring t = even_ring();
+  geometry::fit_to_surface(t.V, t.Q, s, tree, std::vector<char>(16, 1), nullptr, [&](int v) { return t.worst(v); },
+                           o);
+  for (int v = 0; v < 16; ++v)  // (1e-4: the tube's facets)
+    EXPECT_LE(std::hypot(t.V(v, 0), t.V(v, 1)) - 1, 0.01 * len + 1e-4) << v;
+}
+
 TEST(SurfaceFit, FocusedRoundsFinishWhatFewFullRoundsLeave) {
   const SurfaceMesh s = tube(360, 4);
   const geometry::TriangleTree tree(s.V, s.F);

@@ -11,9 +11,11 @@ namespace {
 constexpr int kTriCorner[2][3] = {{0, 1, 2}, {0, 2, 3}};
 
 // The points of a quad measured to the surface (the other side of the distance): its centre and
-// edge midpoints, as bilinear parameters (u, w).
-constexpr int kQuadPoints = 5;
-constexpr double kQuadUV[kQuadPoints][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5}};
+// edge midpoints, as bilinear parameters (u, w); then its corners, which are measured too when they
+// may leave the surface (SurfaceFitOptions::max_offset).
+constexpr int kQuadPoints = 5, kQuadPointsWithCorners = 9;
+constexpr double kQuadUV[kQuadPointsWithCorners][2] = {{0.5, 0.5}, {0.5, 0}, {1, 0.5}, {0.5, 1}, {0, 0.5},
+                                                      {0, 0},     {1, 0},   {1, 1},   {0, 1}};
 
 // Point k of quad q and the bilinear weights b of its four corners there.
 Vec3 quad_point(const MatX3d& V, const MatX4i& Q, int q, int k, double b[4]) {
@@ -82,6 +84,8 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     for (int v = 0; v < n; ++v)
       if (!vq[v].empty()) patch[v] = (*patch_of_face)[tree.closest(V.row(v).transpose()).face];
   const MatX3i QT = split_quads(Q);
+  const bool offset = opt.max_offset > 0;
+  const int quad_points = offset ? kQuadPointsWithCorners : kQuadPoints;
   // The default floor of a quality: its smallest value over the quads' vertices, or 0.5 if lower.
   auto default_floor = [&](const std::function<double(int)>& quality) {
     double m = 1e300;
@@ -129,7 +133,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
   // Largest distance to the surface of the centre and edge midpoints of quad q (the other side).
   auto quad_gap = [&](int q) {
     double m = 0, b[4];
-    for (int k = 0; k < kQuadPoints; ++k) m = std::max(m, tree.closest(quad_point(V, Q, q, k, b)).dist2);
+    for (int k = 0; k < quad_points; ++k) m = std::max(m, tree.closest(quad_point(V, Q, q, k, b)).dist2);
     return std::sqrt(m);
   };
 
@@ -251,7 +255,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
         for (int q : vq[v]) {
           int j = 0;
           while (Q(q, j) != v) ++j;
-          for (int k = 0; k < kQuadPoints; ++k) {
+          for (int k = 0; k < quad_points; ++k) {
             double b[4];  // v's weight there: b[j] (v is corner j)
             const Vec3 x = quad_point(V, Q, q, k, b);
             const ClosestHit h = tree.closest(x);
@@ -266,7 +270,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           }
         }
       };
-      if (opt.two_sided) quad_side(e0, m0, &num, &den);
+      if (opt.two_sided || offset) quad_side(e0, m0, &num, &den);
       if (!(den > 0) || !(m0 > 0)) continue;
       Vec3 step = num / den;
       Vec3 nrm = Vec3::Zero();
@@ -276,7 +280,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       }
       if (!(nrm.norm() > 0)) continue;
       nrm.normalize();
-      step -= step.dot(nrm) * nrm;
+      if (!(offset && is_free)) step -= step.dot(nrm) * nrm;
       double len = 0;
       int count = 0;
       for (int q : vq[v])
@@ -292,7 +296,14 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       const Vec3 x = V.row(v).transpose();
       for (double t : {1.0, 0.5, 0.25}) {
         Vec3 p;
-        if (is_free) {
+        if (is_free && offset) {
+          // Off the surface by at most max_offset of the edge length, along the line to its closest point.
+          const Vec3 y = x + t * step, c = tree.closest(y, &nrm, patch_of_face, patch[v]).point;
+          Vec3 d = y - c;
+          const double lim = opt.max_offset * len;
+          if (d.norm() > lim) d *= lim / d.norm();
+          p = c + d;
+        } else if (is_free) {
           p = tree.closest(x + t * step, &nrm, patch_of_face, patch[v]).point;
         } else if (!slide(v, x + t * step, p)) {
           continue;
@@ -304,7 +315,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           e1 += std::pow(d, p_exp);
           m1 = std::max(m1, d);
         }
-        if (opt.two_sided) quad_side(e1, m1, nullptr, nullptr);
+        if (opt.two_sided || offset) quad_side(e1, m1, nullptr, nullptr);
         if (m1 <= m0 * (1 + 1e-12) && e1 < e0 * (1 - 1e-9) && worst(v) >= std::min(q0, st.floor) &&
             (!shape || shape(v) >= std::min(s0, shape_floor))) {
           ++moves;

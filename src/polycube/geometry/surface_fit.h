@@ -52,6 +52,12 @@ struct SurfaceFitOptions {
   /// largest distance is often reached between a triangle's vertices, centroid and edge midpoints
   /// (fandisk's quads: 3.74e-3 at those samples, 3.88e-3 at the Hausdorff measure's 200k).
   int focus_dense = 0;
+  /// A free vertex may leave the surface along the surface's normal by up to this fraction of the
+  /// mean length of its quad edges (0 = the vertices stay on the surface). A flat quad over a curved
+  /// patch with its corners on the surface cuts under it by the chord's sagitta s; with its corners
+  /// s/2 outside, the largest distance either way is about s/2. The vertex's own distance to the
+  /// surface then joins its energy and its largest distance, so the fitting balances the two sides.
+  double max_offset = 0;
 };
 
 struct SurfaceFitStats {

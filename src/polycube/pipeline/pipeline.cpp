@@ -1324,7 +1324,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                            {"thin_steps", opt.hex.merge_thin_steps},
                            {"thin_step_retry_below", opt.hex.thin_step_retry_below},
                            {"max_edge_ratio", opt.hex.max_edge_ratio}, {"fit_rounds", opt.hex.fit.rounds},
-                           {"fit_floor", opt.hex.fit.quality_floor}, {"sharp_angle_deg", opt.hex.sharp_angle_deg},
+                           {"fit_floor", opt.hex.fit.quality_floor}, {"fit_offset", opt.hex.fit.max_offset},
+                           {"sharp_angle_deg", opt.hex.sharp_angle_deg},
                            {"capture_creases", opt.hex.capture_creases},
                            {"grading", opt.hex.grading.strength}, {"grading_measure", opt.hex.grading.measure},
                            {"grading_max", opt.hex.grading.max_ratio}};
