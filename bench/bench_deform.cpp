@@ -287,6 +287,8 @@ int main(int argc, char** argv) {
                "DeformOptions::neutral_volume_barrier for the volume runs (the CLI's --volume-barrier-form neutral)");
   double grading = hex::GradingOptions{}.strength;
   app.add_option("--grading", grading, "HexOptions::grading.strength (0: the paper's uniform grid)")->capture_default_str();
+  double fit_offset = 0;
+  app.add_option("--fit-offset", fit_offset, "HexOptions::fit.max_offset (the CLI's --fit-offset)")->capture_default_str();
   bool deform_only = false;
   app.add_flag("--deform-only", deform_only,
                "Time the deformation alone (no polycube extraction, no hexes): the columns after l1_quality stay empty");
@@ -416,6 +418,7 @@ int main(int argc, char** argv) {
       if (rr.success || folded) {
         hex::HexOptions ho;
         ho.grading.strength = grading;
+        ho.fit.max_offset = fit_offset;
         ho.folded_map = folded;
         std::string q1 = "-", q2 = "-", q3 = "-", q4 = "-";
         if (!m.paper_row.empty() && paper.count(m.paper_row) && paper[m.paper_row][8] != "-") {
