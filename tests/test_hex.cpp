@@ -221,14 +221,28 @@ TEST(Hex, TetLocatorFindsTheContainingTet) {
   // Outside: found, with a negative min barycentric coordinate.
   EXPECT_LT(loc.locate(Vec3(1.5, 1, 1)).min_bary, -1e-3);
   // Two boxes far apart: a point halfway has no tet within the three rings of buckets searched
-  // around it, and still gets one (the nearest by barycentric coordinates, in either box).
-  MatX3d V2(2 * tm.V.rows(), 3);
-  V2 << tm.V, (tm.V.rowwise() + Eigen::RowVector3d(20, 20, 20));
-  MatX4i T2(2 * tm.T.rows(), 4);
-  T2 << tm.T, (tm.T.array() + static_cast<int>(tm.V.rows())).matrix();
-  const geometry::TetHit far = geometry::TetLocator(V2, T2).locate(Vec3(10.5, 11, 11.5));
+  // around it, and still gets one (the nearest by barycentric coordinates, in either box). (Their
+  // surfaces are fine grids: the box above has a few dozen tets, and buckets of a third of the
+  // whole extent.)
+  const SurfaceMesh g = grid_box(8, Vec3(0, 0, 0), Vec3(1, 2, 3));
+  const TetMesh fine = tet_mesh_of(g.V, g.F, 2000);
+  ASSERT_GT(fine.T.rows(), 1000);
+  MatX3d V2(2 * fine.V.rows(), 3);
+  V2 << fine.V, (fine.V.rowwise() + Eigen::RowVector3d(20, 20, 20));
+  MatX4i T2(2 * fine.T.rows(), 4);
+  T2 << fine.T, (fine.T.array() + static_cast<int>(fine.V.rows())).matrix();
+  const geometry::TetLocator loc2(V2, T2);
+  const geometry::TetHit far = loc2.locate(Vec3(10.5, 11, 11.5));
   EXPECT_GE(far.tet, 0);
   EXPECT_LT(far.min_bary, -1);
+  // Asked only whether it is inside (search_all false): no tet, without the scan of all of them;
+  // points inside or near a box are found as before.
+  EXPECT_EQ(loc2.locate(Vec3(10.5, 11, 11.5), false).tet, -1);
+  for (const Vec3& p : {Vec3(0.5, 1, 1.5), Vec3(20.5, 21, 21.5), Vec3(1.05, 1, 1)}) {
+    const geometry::TetHit a = loc2.locate(p), b = loc2.locate(p, false);
+    EXPECT_EQ(a.tet, b.tet);
+    EXPECT_EQ(a.min_bary, b.min_bary);
+  }
   // Non-finite coordinates (a snapped polycube gone wrong) are refused, not bucketed out of range.
   MatX3d bad = tm.V;
   bad(3, 1) = std::numeric_limits<double>::quiet_NaN();

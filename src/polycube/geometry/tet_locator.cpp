@@ -58,7 +58,7 @@ Eigen::Vector4d TetLocator::barycentric(int t, const Vec3& p) const {
   return Eigen::Vector4d(1 - b.sum(), b[0], b[1], b[2]);
 }
 
-TetHit TetLocator::locate(const Vec3& p) const {
+TetHit TetLocator::locate(const Vec3& p, bool search_all) const {
   TetHit hit;
   if (T_.rows() == 0) return hit;
   const int c[3] = {bucket_of(p, 0), bucket_of(p, 1), bucket_of(p, 2)};
@@ -84,7 +84,7 @@ TetHit TetLocator::locate(const Vec3& p) const {
           if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) == r) scan(x, y, z);
   // No tet within three rings of buckets (far outside, or only flat tets there: a folded map):
   // every tet, so that a point always gets one.
-  if (hit.tet < 0)
+  if (hit.tet < 0 && search_all)
     for (int t = 0; t < T_.rows(); ++t) consider(t);
   return hit;
 }

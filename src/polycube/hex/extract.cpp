@@ -167,16 +167,16 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
   if (piecewise && !X.allFinite())
     throw Error(ErrorKind::Polycube, "the polycube has non-finite coordinates (through a folded map?): no hex grid");
   const geometry::TetLocator loc(piecewise ? X : sn.Y, T);
-  auto query = [&](double gx, double gy, double gz) {
-    return piecewise ? loc.locate(Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz)))
-                     : loc.locate(Vec3(gx, gy, gz));
+  auto query = [&](double gx, double gy, double gz, bool search_all = true) {
+    return piecewise ? loc.locate(Vec3(maps[0].inverse(gx), maps[1].inverse(gy), maps[2].inverse(gz)), search_all)
+                     : loc.locate(Vec3(gx, gy, gz), search_all);
   };
   std::vector<std::array<int, 3>> cells;
   for (int i = 0; i < r.cells[0]; ++i) {
     hooks.report("hex", 0.4 * i / r.cells[0]);
     for (int j = 0; j < r.cells[1]; ++j)
       for (int k = 0; k < r.cells[2]; ++k) {
-        const geometry::TetHit hit = query(i + 0.5, j + 0.5, k + 0.5);
+        const geometry::TetHit hit = query(i + 0.5, j + 0.5, k + 0.5, false);  // inside or not
         if (hit.tet >= 0 && hit.min_bary >= -1e-9) cells.push_back({i, j, k});
       }
   }
