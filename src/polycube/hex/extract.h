@@ -128,6 +128,10 @@ struct HexResult {
   struct Tried {
     std::string variant;          ///< "no_pillow" or "pillow"
     double sj_min = 0, sj_mean = 0;
+    /// Left with inverted hexes, not untangled: the other variant (pillow auto) had none and its
+    /// worst hex at 0.3 or more, which an untangled mesh (worst hex barely positive) does not
+    /// beat.
+    bool untangle_skipped = false;
   };
   std::vector<Tried> tried;       ///< variants optimized (pillow auto: both), the best is the result
   int max_locate_outside = 0;     ///< grid vertices found only outside every tet (by more than round-off)

@@ -1309,7 +1309,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
           hj["creases"] = {{"runs", hr.crease_runs}, {"captured", hr.crease_captured}};
           hj["variants"] = json::array();
           for (const auto& t : hr.tried)
-            hj["variants"].push_back({{"variant", t.variant}, {"sj_min", t.sj_min}, {"sj_mean", t.sj_mean}});
+            hj["variants"].push_back({{"variant", t.variant},
+                                      {"sj_min", t.sj_min},
+                                      {"sj_mean", t.sj_mean},
+                                      {"untangle_skipped", t.untangle_skipped}});
           hj["extracted"] = quality_json(hr.extracted);
           hj["extracted"].erase("sj_histogram");
           hj["smooth_moves"] = hr.smooth_moves;
