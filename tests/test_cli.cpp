@@ -794,24 +794,34 @@ TEST(Cli, PolycubeFromAGivenDeformationAtOneThread) {
   EXPECT_TRUE(read_text(dir + "/b/polycube.mesh") == read_text(dir + "/full/polycube.mesh"));
 }
 
+namespace {
+// The sphere example's polycube, then its hexes through that map twice: with the default options,
+// and with `flags` added. Both must succeed with no hex inverted; their report's "hex" sections.
+std::array<json, 2> sphere_hexes_with_and_without(const std::string& name, const std::string& flags) {
+  const std::string dir = temp_dir(name);
+  EXPECT_EQ(run_cli("--example sphere --until polycube -q -o " + dir + "/a").code, 0);
+  std::array<json, 2> h;
+  for (int k = 0; k < 2; ++k) {
+    const std::string out = dir + (k == 0 ? "/default" : "/option");
+    RunResult r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex -q -o " + out +
+                          (k == 0 ? "" : " " + flags));
+    EXPECT_EQ(r.code, 0) << r.output;
+    if (r.code != 0) return h;
+    h[k] = report(out)["hex"];
+    EXPECT_EQ(h[k]["inverted"], 0);
+  }
+  return h;
+}
+}  // namespace
+
 TEST(Cli, HexOptimizationDoesNotSqueezeHexesIntoSlivers) {
   // The sphere's hexes through the same polycube map, with the default edge-ratio limit of the
   // optimization (10) and without it (0): the scaled Jacobian does not see a thin box, and without
   // the limit the optimization squeezed pillow hexes (2026-11-27: edge ratio max 74.0, 72 hexes
   // over 10; with it 24.8 and 26, min scaled Jacobian 0.725 against 0.748; with the slivers'
   // vertices also moved to widen them, 10.0 and none over 10, min 0.741).
-  std::string dir = temp_dir("edge_ratio");
-  ASSERT_EQ(run_cli("--example sphere --until polycube -q -o " + dir + "/a").code, 0);
-  json h[2];
-  for (int k = 0; k < 2; ++k) {
-    const std::string out = dir + (k == 0 ? "/limit" : "/none");
-    RunResult r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex -q -o " + out +
-                          (k == 0 ? "" : " --max-edge-ratio 0"));
-    ASSERT_EQ(r.code, 0) << r.output;
-    h[k] = report(out)["hex"];
-    EXPECT_EQ(h[k]["inverted"], 0);
-    EXPECT_GT(h[k]["sj_min"].get<double>(), 0.6);
-  }
+  const std::array<json, 2> h = sphere_hexes_with_and_without("edge_ratio", "--max-edge-ratio 0");
+  for (int k = 0; k < 2; ++k) EXPECT_GT(h[k]["sj_min"].get<double>(), 0.6);
   EXPECT_DOUBLE_EQ(h[0]["options"]["max_edge_ratio"].get<double>(), 10.0);
   EXPECT_EQ(h[0]["count"], h[1]["count"]);
   EXPECT_LT(h[0]["edge_ratio"]["max"].get<double>(), 0.5 * h[1]["edge_ratio"]["max"].get<double>());
@@ -855,17 +865,8 @@ TEST(Cli, FitOffsetTakesTheHexBoundaryOffTheSurfaceAndCloserToIt) {
   // surface (default) and allowed off it by up to 0.3 of their edge length: the flat quads then cut
   // the sphere on both sides: mean distance 0.238e-3 -> 0.145e-3 of the diagonal, Hausdorff
   // 1.19e-3 -> 0.99e-3 (12432 hexes, scaled Jacobian min 0.720 either way).
-  std::string dir = temp_dir("fit_offset");
-  ASSERT_EQ(run_cli("--example sphere --until polycube -q -o " + dir + "/a").code, 0);
-  json h[2];
-  for (int k = 0; k < 2; ++k) {
-    const std::string out = dir + (k == 0 ? "/on" : "/off");
-    RunResult r = run_cli(dir + "/a/tetmesh.mesh --polycube-map " + dir + "/a/polycube.mesh --hex -q -o " + out +
-                          (k == 0 ? "" : " --fit-offset 0.3"));
-    ASSERT_EQ(r.code, 0) << r.output;
-    h[k] = report(out)["hex"];
-    EXPECT_EQ(h[k]["inverted"], 0);
-  }
+  const std::array<json, 2> h = sphere_hexes_with_and_without("fit_offset", "--fit-offset 0.3");
+  const std::string dir = (test_temp_root() / "fit_offset").string();
   EXPECT_DOUBLE_EQ(h[0]["options"]["fit_offset"].get<double>(), 0.0);
   EXPECT_DOUBLE_EQ(h[1]["options"]["fit_offset"].get<double>(), 0.3);
   EXPECT_EQ(h[0]["count"], h[1]["count"]);
