@@ -1,7 +1,9 @@
 #include "polycube/geometry/surface_fit.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <limits>
 
 namespace polycube::geometry {
 
@@ -131,9 +133,30 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     mean /= std::max(1, ns);
   };
   // Largest distance to the surface of the centre and edge midpoints of quad q (the other side).
+  // Closest points of the quads' points on the surface, cached per quad point in two slots: the
+  // last position measured before a move (slot 0) and the last trial (slot 1). A vertex's visit
+  // measures its quads before and at up to three trial positions, and most of those points have
+  // not moved since the last visit of a neighbour; a cached hit is used only for the very same
+  // point, so the results are those of the query.
+  const size_t n_cache = static_cast<size_t>(nq) * quad_points;
+  std::array<std::vector<Vec3>, 2> cache_x;
+  std::array<std::vector<ClosestHit>, 2> cache_hit;
+  for (int slot = 0; slot < 2; ++slot) {
+    cache_x[slot].assign(n_cache, Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
+    cache_hit[slot].resize(n_cache);
+  }
+  auto closest_of_quad_point = [&](int q, int k, const Vec3& x, int slot) -> const ClosestHit& {
+    const size_t i = static_cast<size_t>(q) * quad_points + k;
+    for (int s = 0; s < 2; ++s)
+      if (cache_x[s][i] == x) return cache_hit[s][i];
+    cache_x[slot][i] = x;
+    cache_hit[slot][i] = tree.closest(x);
+    return cache_hit[slot][i];
+  };
   auto quad_gap = [&](int q) {
     double m = 0, b[4];
-    for (int k = 0; k < quad_points; ++k) m = std::max(m, tree.closest(quad_point(V, Q, q, k, b)).dist2);
+    for (int k = 0; k < quad_points; ++k)
+      m = std::max(m, closest_of_quad_point(q, k, quad_point(V, Q, q, k, b), 0).dist2);
     return std::sqrt(m);
   };
 
@@ -251,14 +274,14 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
         den += w * nr.weight_of * nr.weight_of;
       }
       // The other side: points of v's quads (centre, edge midpoints) to the surface.
-      auto quad_side = [&](double& e, double& m, Vec3* num_out, double* den_out) {
+      auto quad_side = [&](double& e, double& m, Vec3* num_out, double* den_out, int slot) {
         for (int q : vq[v]) {
           int j = 0;
           while (Q(q, j) != v) ++j;
           for (int k = 0; k < quad_points; ++k) {
             double b[4];  // v's weight there: b[j] (v is corner j)
             const Vec3 x = quad_point(V, Q, q, k, b);
-            const ClosestHit h = tree.closest(x);
+            const ClosestHit& h = closest_of_quad_point(q, k, x, slot);
             const double d = std::sqrt(h.dist2);
             e += std::pow(d, p_exp);
             m = std::max(m, d);
@@ -270,7 +293,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           }
         }
       };
-      if (opt.two_sided || offset) quad_side(e0, m0, &num, &den);
+      if (opt.two_sided || offset) quad_side(e0, m0, &num, &den, 0);
       if (!(den > 0) || !(m0 > 0)) continue;
       Vec3 step = num / den;
       Vec3 nrm = Vec3::Zero();
@@ -315,7 +338,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
           e1 += std::pow(d, p_exp);
           m1 = std::max(m1, d);
         }
-        if (opt.two_sided || offset) quad_side(e1, m1, nullptr, nullptr);
+        if (opt.two_sided || offset) quad_side(e1, m1, nullptr, nullptr, 1);
         if (m1 <= m0 * (1 + 1e-12) && e1 < e0 * (1 - 1e-9) && worst(v) >= std::min(q0, st.floor) &&
             (!shape || shape(v) >= std::min(s0, shape_floor))) {
           ++moves;
