@@ -132,7 +132,6 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     }
     mean /= std::max(1, ns);
   };
-  // Largest distance to the surface of the centre and edge midpoints of quad q (the other side).
   // Closest points of the quads' points on the surface, cached per quad point in two slots: the
   // last position measured before a move (slot 0) and the last trial (slot 1). A vertex's visit
   // measures its quads before and at up to three trial positions, and most of those points have
@@ -153,6 +152,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
     cache_hit[slot][i] = tree.closest(x);
     return cache_hit[slot][i];
   };
+  // Largest distance to the surface of the points of quad q (the other side).
   auto quad_gap = [&](int q) {
     double m = 0, b[4];
     for (int k = 0; k < quad_points; ++k)
@@ -273,7 +273,7 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
         num += w * nr.weight_of * nr.residual;
         den += w * nr.weight_of * nr.weight_of;
       }
-      // The other side: points of v's quads (centre, edge midpoints) to the surface.
+      // The other side: points of v's quads (centre, edge midpoints; corners with max_offset) to the surface.
       auto quad_side = [&](double& e, double& m, Vec3* num_out, double* den_out, int slot) {
         for (int q : vq[v]) {
           int j = 0;
@@ -319,15 +319,16 @@ SurfaceFitStats fit_to_surface(MatX3d& V, const MatX4i& Q, const SurfaceMesh& ta
       const Vec3 x = V.row(v).transpose();
       for (double t : {1.0, 0.5, 0.25}) {
         Vec3 p;
-        if (is_free && offset) {
-          // Off the surface by at most max_offset of the edge length, along the line to its closest point.
-          const Vec3 y = x + t * step, c = tree.closest(y, &nrm, patch_of_face, patch[v]).point;
-          Vec3 d = y - c;
-          const double lim = opt.max_offset * len;
-          if (d.norm() > lim) d *= lim / d.norm();
-          p = c + d;
-        } else if (is_free) {
-          p = tree.closest(x + t * step, &nrm, patch_of_face, patch[v]).point;
+        if (is_free) {
+          const Vec3 y = x + t * step;
+          p = tree.closest(y, &nrm, patch_of_face, patch[v]).point;
+          if (offset) {
+            // Off the surface by at most max_offset of the edge length, along the line to its closest point.
+            Vec3 d = y - p;
+            const double lim = opt.max_offset * len;
+            if (d.norm() > lim) d *= lim / d.norm();
+            p += d;
+          }
         } else if (!slide(v, x + t * step, p)) {
           continue;
         }

@@ -471,14 +471,15 @@ HexResult hex_mesh_from_polycube(const MatX3d& rest, const MatX4i& T, const MatX
       }
       published_cv.notify_all();
     }
-    if (slot >= 0 && opt.untangle && opt.smooth_iterations > 0 && c.quality.inverted > 0) {
+    // (Not when the optimization is off: the quad stage takes the grid's boundary as extracted.)
+    const bool untangle = opt.untangle && opt.smooth_iterations > 0 && c.quality.inverted > 0;
+    if (slot >= 0 && untangle) {
       std::unique_lock<std::mutex> lock(published_mutex);
       published_cv.wait(lock, [&] { return published[1 - slot].done; });
       const Published& other = published[1 - slot];
       if (other.inverted == 0 && other.sj_min >= kSkipUntangleAbove) c.untangle_skipped = true;
     }
-    // (Not when the optimization is off: the quad stage takes the grid's boundary as extracted.)
-    if (opt.untangle && opt.smooth_iterations > 0 && c.quality.inverted > 0 && !c.untangle_skipped) {
+    if (untangle && !c.untangle_skipped) {
       // The local optimization stops at folds that need a move making one hex worse first: the
       // inverted corners are untangled with the boundary and features held, then optimized again.
       const MatX4i Qc = boundary_quads(c.H);
