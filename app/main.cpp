@@ -179,6 +179,13 @@ int main(int argc, char** argv) {
                  "Surface mode, closed surfaces: weight of the barrier that keeps the two sides of thin parts "
                  "apart (0 = off)")
       ->capture_default_str()->check(CLI::NonNegativeNumber);
+  app.add_option_function<std::string>(
+         "--thickness-form", [&d](const std::string& form) { d.thickness_contact = form == "contact"; },
+         "Surface mode: pairs = each vertex of a thin part held against one point across, fixed at rest; "
+         "contact = against every triangle across that comes near it in the current shape (with a collision "
+         "check in the line search), which the two sides sliding along each other do not fool")
+      ->default_str(d.thickness_contact ? "contact" : "pairs")
+      ->check(CLI::IsMember({"pairs", "contact"}));
   app.add_option("--gap-barrier", d.gap_weight,
                  "Polycube deformation (volume): weight of the barrier that keeps the gaps between parts (legs, an "
                  "arm and the body) open, narrower than --thickness-max, at least --thickness-keep of their width; "

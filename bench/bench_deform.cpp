@@ -62,7 +62,8 @@ std::map<std::string, std::vector<std::string>> read_paper_table(const std::stri
 
 // Surface mode and its quads beside Table I (fandisk, rockerArm at the paper's quad counts; other
 // models at 2000 quads, without a paper row).
-int quad_bench(const std::string& shared, const std::vector<std::string>& only, double beta, double sqp_tolerance) {
+int quad_bench(const std::string& shared, const std::vector<std::string>& only, double beta, double sqp_tolerance,
+               bool contact) {
   struct QuadModel {
     std::string file, paper_row;
   };
@@ -82,7 +83,9 @@ int quad_bench(const std::string& shared, const std::vector<std::string>& only, 
   deform::DeformOptions dopt;
   dopt.beta = beta;
   dopt.sqp_tolerance = sqp_tolerance;
-  std::printf("beta %g, sqp tolerance %g\n\n", beta, dopt.sqp_tolerance_for(true));
+  dopt.thickness_contact = contact;
+  std::printf("beta %g, sqp tolerance %g, thickness barrier %s\n\n", beta, dopt.sqp_tolerance_for(true),
+              contact ? "contact" : "pairs");
   std::printf("| model | triangles | deform s | polycube s | corners | polycube ARAP | quads | SJ min / mean / max | "
               "inverted | edge ratio max / over 10 | Hausdorff (1e-3) | RMS distance (1e-3) | creases kept / runs | quad s | "
               "paper: quads | corners | SJ min / mean / max | Hausdorff |\n");
@@ -268,6 +271,10 @@ int main(int argc, char** argv) {
   double quad_beta = 0;
   app.add_option("--quad-beta", quad_beta, "With --quad-table: the complexity penalty weight beta of the deformation")
       ->capture_default_str();
+  std::string thickness_form = "pairs";
+  app.add_option("--thickness-form", thickness_form, "With --quad-table: the CLI's --thickness-form (pairs or contact)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"pairs", "contact"}));
   double sqp_tolerance = -1;
   app.add_option("--sqp-tolerance", sqp_tolerance,
                  "DeformOptions::sqp_tolerance (negative: the default for the mode)")
@@ -312,7 +319,7 @@ int main(int argc, char** argv) {
   // What the timings and the bits depend on, above every table.
   const std::string core = blas_core();
   std::printf("threads %d, BLAS kernels %s\n", hardware_threads(), core.empty() ? "(not OpenBLAS)" : core.c_str());
-  if (quad_table) return quad_bench(shared, only, quad_beta, sqp_tolerance);
+  if (quad_table) return quad_bench(shared, only, quad_beta, sqp_tolerance, thickness_form == "contact");
   if (quad_volume) return quad_volume_bench(shared, only, save_dir);
   if (survey_all) return survey(shared, only, save_dir);
 

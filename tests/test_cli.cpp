@@ -32,6 +32,18 @@ TEST(Cli, HelpListsOptionsWithDefaults) {
     EXPECT_NE(r.output.find(s), std::string::npos) << s;
 }
 
+TEST(Cli, ThicknessFormIsReported) {
+  const std::string out = temp_dir("thickness_form");
+  RunResult r = run_cli("--example sphere --surface --until deform --thickness-form contact -o " + out);
+  ASSERT_EQ(r.code, 0) << r.output;
+  const auto j = nlohmann::json::parse(read_text(out + "/report.json"));
+  EXPECT_EQ(j["polycube"]["thickness_form"], "contact");
+  EXPECT_EQ(j["polycube"]["contact_step_cuts"], 0);  // a sphere has no thin part: no contact
+  r = run_cli("--example sphere --surface --until deform --thickness-form glue -o " + out);
+  EXPECT_EQ(r.code, 2) << r.output;
+  EXPECT_NE(r.output.find("thickness-form"), std::string::npos) << r.output;
+}
+
 TEST(Cli, ExampleList) {
   RunResult r = run_cli("--example list");
   EXPECT_EQ(r.code, 0);

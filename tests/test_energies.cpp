@@ -5,6 +5,7 @@
 #include <random>
 
 #include "polycube/core/lbfgs.h"
+#include "polycube/deform/contact.h"
 #include "polycube/deform/energies.h"
 #include "polycube/validate/tetmesh.h"
 #include "test_util.h"
@@ -364,6 +365,113 @@ TEST(Energies, ThicknessPairsAndBarrierOfAThinPlate) {
     for (int k = 0; k < 3; ++k) X(i, k) += u(rng);
   expect_gradient(E, X);
   expect_psd(hessian(E, X));
+}
+
+TEST(Energies, ContactBarrierSeesThePlateSidesSlidingAlongEachOther) {
+  // The 1 x 1 x 0.04 plate of the test above: every vertex of its top and bottom faces is 0.04 from
+  // the other face, so its contact distance is half that (keep 0.5).
+  const SurfaceMesh plate = grid_box(4, Vec3(0, 0, 0), Vec3(1, 1, 0.04));
+  const double diag = std::sqrt(2.0 + 0.04 * 0.04), keep = 0.5;
+  const ContactRest rest = ContactRest::build(plate.V, plate.F, keep, 0.05 * diag);
+  int faces = 0;
+  for (int v = 0; v < plate.V.rows(); ++v) {
+    const bool on_face = plate.V(v, 2) == 0 || plate.V(v, 2) == 0.04;
+    faces += on_face;
+    EXPECT_NEAR(rest.dhat[v], on_face ? 0.02 : 0.0, 1e-12) << plate.V.row(v);
+  }
+  EXPECT_EQ(rest.vertices, faces);
+  EXPECT_NEAR(rest.dhat_max, 0.02, 1e-12);
+  // Thresholds: none with the vertex's own triangles or triangles of its side (same normal), the
+  // contact distance with the face across.
+  for (int f = 0; f < plate.F.rows(); ++f) {
+    const Vec3 n = area_normal(plate.V, plate.F(f, 0), plate.F(f, 1), plate.F(f, 2)).normalized();
+    for (int v = 0; v < plate.V.rows(); ++v) {
+      if (!(rest.dhat[v] > 0)) continue;
+      const bool top = plate.V(v, 2) == 0.04;
+      const bool incident = plate.F(f, 0) == v || plate.F(f, 1) == v || plate.F(f, 2) == v;
+      const bool same_side = top ? n.z() > 0.5 : n.z() < -0.5;
+      if (incident || same_side) {
+        EXPECT_EQ(rest.threshold(v, f), 0.0);
+      }
+      if (!incident && n.z() < -0.5 && top) {
+        EXPECT_NEAR(rest.threshold(v, f), 0.02, 1e-12);
+      }
+    }
+  }
+  EnergyFn E = [&](const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) {
+    return contact_energy(X, rest, 0.7, g, H);
+  };
+  auto squashed = [&](double f) {
+    MatX3d X = plate.V;
+    X.col(2) *= f;
+    return X;
+  };
+  EXPECT_EQ(E(plate.V, nullptr, nullptr), 0.0);
+  EXPECT_EQ(E(squashed(0.6), nullptr, nullptr), 0.0);  // 0.024 across: above the contact distance
+  // At 30% (0.012 across, r = 0.6 of the contact distance) each face vertex lies right over a vertex
+  // of the face across, as close to its six triangles: one contact each, not six.
+  int active = 0;
+  const double pressed = contact_energy(squashed(0.3), rest, 0.7, nullptr, nullptr, &active);
+  EXPECT_EQ(active, faces);
+  const double r = 0.6;
+  double w = 0;
+  for (int v = 0; v < plate.V.rows(); ++v) w += rest.dhat[v] > 0 ? rest.w[v] : 0.0;
+  EXPECT_NEAR(pressed, 0.7 * w * -(r - 1) * (r - 1) * std::log(r), 1e-12);
+  // The same pressed plate with its top face slid 0.1 along x: the fixed pairs of the thickness
+  // barrier are then 0.1 apart and see nothing (ThicknessPairsAndBarrierOfAThinPlate); the contact
+  // barrier sees the face across as close as before (but at the rims that slid past each other).
+  MatX3d slid = squashed(0.3);
+  for (int v = 0; v < slid.rows(); ++v)
+    if (plate.V(v, 2) == 0.04) slid(v, 0) += 0.1;
+  const std::vector<ThicknessPair> pairs = thickness_pairs(plate.V, plate.F, 0.05 * diag);
+  EXPECT_EQ(thickness_energy(slid, plate.F, pairs, keep, 0.7, nullptr, nullptr), 0.0);
+  EXPECT_GT(E(slid, nullptr, nullptr), 0.6 * pressed);
+  EXPECT_LT(E(slid, nullptr, nullptr), pressed);
+  EXPECT_TRUE(std::isinf(E(squashed(0.0), nullptr, nullptr)));  // the two faces on each other
+  // Gradient (exact) and Hessian (Gauss-Newton, block-diagonal: PSD) in the active range, jittered.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.002, 0.002);
+  for (int i = 0; i < slid.rows(); ++i)
+    for (int k = 0; k < 3; ++k) slid(i, k) += u(rng);
+  expect_gradient(E, slid);
+  const Eigen::MatrixXd H = hessian(E, slid);
+  expect_psd(H);
+  EXPECT_GT(H.diagonal().maxCoeff(), 0.0);
+  for (int i = 0; i < slid.rows(); ++i)  // nothing outside the 3 x 3 diagonal blocks
+    for (int j = 0; j < slid.rows(); ++j)
+      if (i != j) {
+        EXPECT_EQ(H.block(3 * i, 3 * j, 3, 3).norm(), 0.0);
+      }
+}
+
+TEST(Energies, ContactStepBoundStopsAtTheTriangleAcrossNotAlongIt) {
+  const SurfaceMesh plate = grid_box(4, Vec3(0, 0, 0), Vec3(1, 1, 0.04));
+  const double diag = std::sqrt(2.0 + 0.04 * 0.04);
+  const ContactRest rest = ContactRest::build(plate.V, plate.F, 0.5, 0.05 * diag);
+  auto top_moved = [&](const Vec3& d) {
+    MatX3d D = MatX3d::Zero(plate.V.rows(), 3);
+    for (int v = 0; v < plate.V.rows(); ++v)
+      if (plate.V(v, 2) == 0.04) D.row(v) = d.transpose();
+    return D;
+  };
+  // The top face pushed down by 0.08 reaches the bottom face halfway: 0.8 of that.
+  EXPECT_NEAR(contact_step_bound(plate.V, top_moved(Vec3(0, 0, -0.08)), rest), 0.4, 1e-9);
+  EXPECT_NEAR(contact_step_bound(plate.V, top_moved(Vec3(0, 0, -0.4)), rest), 0.08, 1e-9);
+  // Pushed down slanted: it meets the bottom face (or its rim) at the same height.
+  EXPECT_NEAR(contact_step_bound(plate.V, top_moved(Vec3(0.3, 0.2, -0.08)), rest), 0.4, 1e-9);
+  // Slid along the bottom face, or lifted off it: no limit.
+  EXPECT_EQ(contact_step_bound(plate.V, top_moved(Vec3(0.5, 0.3, 0)), rest), 1.0);
+  EXPECT_EQ(contact_step_bound(plate.V, top_moved(Vec3(0, 0, 0.5)), rest), 1.0);
+  const MatX3d still = MatX3d::Zero(plate.V.rows(), 3);
+  EXPECT_EQ(contact_step_bound(plate.V, still, rest), 1.0);
+  // No thin part: no bound whatever the motion.
+  const SurfaceMesh box = grid_box(4);
+  const ContactRest thick = ContactRest::build(box.V, box.F, 0.5, 0.05 * std::sqrt(3.0));
+  EXPECT_EQ(thick.vertices, 0);
+  MatX3d D = MatX3d::Zero(box.V.rows(), 3);
+  D.col(2).setConstant(-5.0);
+  D(0, 2) = 5.0;
+  EXPECT_EQ(contact_step_bound(box.V, D, thick), 1.0);
 }
 
 TEST(Energies, SurfaceArapGradientHessianAndZeroAtRest) {

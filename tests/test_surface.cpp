@@ -77,6 +77,46 @@ TEST(SurfaceDeform, ThinPlateIsNotReportedFlattened) {
   EXPECT_FALSE(deform::thickness_pairs(b.V, b.F, 0.05 * std::sqrt(2.0)).empty());
 }
 
+// A leaf: an ellipsoid 2 x 0.6 x 0.06 (8192 triangles). The plain deformation presses it flat
+// (thin_crushed), and the thickness barrier's fixed pairs do not hold it: its two faces slid along
+// each other by up to 0.03 along x while pressed to 0.0012 apart in z (every pair still at half its
+// rest distance; measured 2026-12-08). The contact barrier sees the face across wherever it slides:
+// the leaf keeps 0.022 of its 0.06 (mirror vertices 0.021 apart at the median, 0.006 at the rim), and
+// no vertex passes to the other side.
+TEST(SurfaceDeform, ContactBarrierKeepsALeafThick) {
+  SurfaceMesh s = sphere(5);
+  for (int i = 0; i < s.V.rows(); ++i) s.V.row(i) = s.V.row(i).cwiseProduct(Eigen::RowVector3d(1, 0.3, 0.03));
+  deform::DeformOptions o;
+  o.thickness_contact = true;
+  const auto r = deform::deform_surface_to_polycube(s.V, s.F, o);
+  EXPECT_GT(r.thin_crushed, 0.1);  // the plain first pass pressed it
+  EXPECT_TRUE(r.converged);
+  EXPECT_LT(r.l1_quality, 1e-3);
+  EXPECT_GT(r.thickness_pairs, 0);
+  EXPECT_GT(r.contact_active, 0);
+  const Vec3 extent = (r.X.colwise().maxCoeff() - r.X.colwise().minCoeff()).transpose();
+  int thin = 0;
+  extent.minCoeff(&thin);
+  EXPECT_GT(extent[thin], 0.015) << extent.transpose();
+  // Each vertex of the upper face against its mirror image (x, y, -z) of the lower face: on the
+  // same side as at rest, along the thin axis.
+  std::map<std::pair<double, double>, int> lower;
+  for (int v = 0; v < s.V.rows(); ++v)
+    if (s.V(v, 2) < 0) lower[{s.V(v, 0), s.V(v, 1)}] = v;
+  std::vector<double> gaps;
+  for (int v = 0; v < s.V.rows(); ++v) {
+    if (!(s.V(v, 2) > 0)) continue;
+    auto it = lower.find({s.V(v, 0), s.V(v, 1)});
+    if (it == lower.end()) continue;
+    gaps.push_back(r.X(v, thin) - r.X(it->second, thin));
+  }
+  ASSERT_GT(gaps.size(), 1000u);
+  std::sort(gaps.begin(), gaps.end());
+  const double sign = gaps[gaps.size() / 2] > 0 ? 1 : -1;  // (the polycube may face the leaf either way)
+  EXPECT_GT(sign * (sign > 0 ? gaps.front() : gaps.back()), 0.0);
+  EXPECT_GT(std::abs(gaps[gaps.size() / 2]), 0.015);
+}
+
 TEST(SurfaceDeform, SphereBecomesASixChartPolycube) {
   auto s = sphere(4, Vec3(5, -3, 2), 4.0);
   auto r = deform::deform_surface_to_polycube(s.V, s.F, {});

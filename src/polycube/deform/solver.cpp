@@ -7,10 +7,12 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <sstream>
 
 #include "polycube/core/error.h"
 #include "polycube/core/parallel.h"
+#include "polycube/deform/contact.h"
 #include "polycube/deform/untangle.h"
 #include "polycube/deform/sparse_system.h"
 #include "polycube/validate/tetmesh.h"
@@ -77,6 +79,9 @@ struct Problem {
   // Per kind of evaluation (energy only, with the Hessian) and per thread of evaluate's split: the
   // seconds its own terms took last time (where the ARAP's second half goes; timing only).
   mutable std::array<std::array<double, 2>, 2> side_seconds{};
+  // Surface mode with DeformOptions::thickness_contact: the contact barrier (instead of the pairs
+  // in `thickness`).
+  std::shared_ptr<const ContactRest> contact;
 
   double distortion(const MatX3d& X, Eigen::VectorXd* g, HessianSink* H) const {
     return surface ? surface_arap_energy(X, B, srest, 1.0, g, H) : arap_energy(X, T, rest, 1.0, g, H);
@@ -112,6 +117,13 @@ Energies evaluate_volume_terms(const Problem& p, const MatX3d& X, Eigen::VectorX
   Energies e;
   if (p.surface && p.area_weight > 0) {
     e.volume = area_barrier_energy(X, p.B, p.srest, p.area_weight, g, H);
+    if (!std::isfinite(e.volume)) {
+      e.total = std::numeric_limits<double>::infinity();
+      return e;
+    }
+  }
+  if (p.contact) {
+    e.volume += contact_energy(X, *p.contact, p.opt.thickness_weight, g, H);
     if (!std::isfinite(e.volume)) {
       e.total = std::numeric_limits<double>::infinity();
       return e;
@@ -294,7 +306,7 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   const bool resumed = opt.start.rows() > 0;
   POLYCUBE_ASSERT(!resumed || opt.start.rows() == V.rows(), "the start positions do not match the mesh");
 
-  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, {}, false, {}, {}, 0, 0, {}};
+  Problem p{T, B, face_pairs(B), ArapRest::build(X, T), 1.0, opt, opt.volume_barrier_weight, {}, false, {}, {}, 0, 0, {}, {}, {}};
   if (opt.volume_boost_factor > 1 && p.volume_weight > 0 && T.rows() > 0) p.boost.assign(T.rows(), 1.0);
   double l1 = 0;
   l1_measure(X, B, l1, p.area0);
@@ -311,7 +323,13 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       // width h = weight * A / L along it, so that the term's share does not depend on the resolution.
       p.border_h = opt.border_weight * p.area0 / std::max(1e-300, len);
     }
-    if (p.border.empty() && opt.thickness_weight > 0) p.thickness = thickness_pairs(X, B, opt.thickness_max);
+    if (p.border.empty() && opt.thickness_weight > 0) {
+      if (opt.thickness_contact)
+        p.contact = std::make_shared<const ContactRest>(
+            ContactRest::build(X, B, opt.thickness_keep, opt.thickness_max));
+      else
+        p.thickness = thickness_pairs(X, B, opt.thickness_max);
+    }
   } else if (opt.gap_weight > 0) {
     p.thickness = thickness_pairs(X, B, opt.thickness_max, true);  // the gaps between parts
   }
@@ -497,7 +515,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
       t_fac += sw_fac.seconds();
       Stopwatch sw_ls;
       // Backtracking: no inverted tet, finite barrier, decrease of the energy on the constraint.
-      double t = 1.0, accepted = 0;
+      // The contact barrier's continuous collision check: no step through a triangle.
+      double t = p.contact ? contact_step_bound(X, D, *p.contact) : 1.0, accepted = 0;
+      res.contact_step_cuts += t < 1.0;
       int inverted_trials = 0, infinite_trials = 0;
       MatX3d Xt;
       Energies et;
@@ -637,7 +657,8 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   res.inverted = measure_tets(res.X, T).inverted;
   res.converged = q < opt.target_quality;
   res.seconds = clock.seconds();
-  res.thickness_pairs = static_cast<int>(p.thickness.size());
+  res.thickness_pairs = p.contact ? p.contact->vertices : static_cast<int>(p.thickness.size());
+  if (p.contact) contact_energy(X, *p.contact, 1.0, nullptr, nullptr, &res.contact_active);
   if (!p.thickness.empty()) res.thin_crushed_after = crushed_fraction(X, B, p.thickness, opt.thickness_keep);
   if (p.surface && p.border.empty()) {
     const MatX3d rest = (V.rowwise() - centre) / scale;

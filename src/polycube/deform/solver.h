@@ -56,6 +56,11 @@ struct DeformOptions {
   /// diagonal) at least thickness_keep of their rest distance apart, so that thin parts are not
   /// folded flat into double sheets (the surface ARAP does not see folds).
   double thickness_weight = 1.0;
+  /// Surface mode: the thickness barrier as a contact barrier (contact_energy: every vertex of a
+  /// thin part against every triangle across that comes near it in the current shape, with a
+  /// continuous collision check in the line search) rather than fixed pairs (thickness_energy),
+  /// which the two sides of a part fool when they slide along each other as it is pressed flat.
+  bool thickness_contact = false;
   /// Volume mode: weight of the same barrier across the gaps between parts narrower than
   /// thickness_max (exterior pairs, see thickness_pairs; thickness_keep and thickness_retry_above
   /// as for thin parts), which nothing else keeps open; 0 = off (default). Homer's legs are pressed
@@ -218,6 +223,10 @@ struct DeformResult {
   double thin_crushed = 0;
   /// The same fraction at the end, over the pairs the barrier kept (0 without the barrier).
   double thin_crushed_after = 0;
+  /// With the contact barrier (DeformOptions::thickness_contact, in the pass that used it): the
+  /// vertex-triangle pairs within their contact distance at the end, and the SQP iterations whose
+  /// step the collision check shortened.
+  int contact_active = 0, contact_step_cuts = 0;
   /// Surface mode, closed surfaces: the thin parts pressed flat at the end, their gaps measured
   /// across (flattened_parts with thickness_keep): what the barrier's distances miss when the two
   /// sides slide along each other. places: vertices of V, worst first, up to five, at least 0.1 of

@@ -601,7 +601,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                  {"slim_collapse", slim},
                  {"thickness_pairs", dr.thickness_pairs},
                  {"thin_crushed", dr.thin_crushed},
-                 {"thin_crushed_after", dr.thin_crushed_after}};
+                 {"thin_crushed_after", dr.thin_crushed_after},
+                 {"thickness_form", opt.deform.thickness_contact ? "contact" : "pairs"},
+                 {"contact_active", dr.contact_active},
+                 {"contact_step_cuts", dr.contact_step_cuts}};
       pj["rotation"] = json::array();
       for (int r = 0; r < 3; ++r) pj["rotation"].push_back({dr.rotation(r, 0), dr.rotation(r, 1), dr.rotation(r, 2)});
       json hist = json::array();
