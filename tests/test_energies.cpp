@@ -417,6 +417,13 @@ TEST(Energies, ContactBarrierSeesThePlateSidesSlidingAlongEachOther) {
   double w = 0;
   for (int v = 0; v < plate.V.rows(); ++v) w += rest.dhat[v] > 0 ? rest.w[v] : 0.0;
   EXPECT_NEAR(pressed, 0.7 * w * -(r - 1) * (r - 1) * std::log(r), 1e-12);
+  // Measured the same way (contact_flattened): nothing at rest or at 60%, all of it at 30%.
+  EXPECT_EQ(contact_flattened(plate.V, rest).fraction, 0.0);
+  EXPECT_EQ(contact_flattened(squashed(0.6), rest).vertex(), -1);
+  const Flattened flat = contact_flattened(squashed(0.3), rest);
+  EXPECT_NEAR(flat.fraction, w, 1e-12);
+  EXPECT_NEAR(flat.ratio, 0.3, 1e-12);
+  EXPECT_GE(flat.places.size(), 2u);
   // The same pressed plate with its top face slid 0.1 along x: the fixed pairs of the thickness
   // barrier are then 0.1 apart and see nothing (ThicknessPairsAndBarrierOfAThinPlate); the contact
   // barrier sees the face across as close as before (but at the rims that slid past each other).

@@ -189,10 +189,11 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
         }
       found.push_back({key, tau, d, f, bary});
     });
+    const double wv = rest.w[v];
     for (const Contact& c : found) {
       if (c.d >= c.tau) continue;
       const double r = c.d / c.tau, lr = std::log(r);
-      E += rest.w[v] * -(r - 1) * (r - 1) * lr;
+      E += wv * -(r - 1) * (r - 1) * lr;
       if (active) ++*active;
       if (!grad && !hess) continue;
       const double b1 = -2 * (r - 1) * lr - (r - 1) * (r - 1) / r;
@@ -202,8 +203,8 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
       const Vec3 u = (x - p) / c.d;  // d(distance)/dx_v; -bary_i u for the triangle's corners
       const int vs[4] = {v, F(f, 0), F(f, 1), F(f, 2)};
       const double sc[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
-      const double gscale = weight * rest.w[v] * b1 / c.tau;
-      const double hscale = 2 * weight * rest.w[v] * b2 / (c.tau * c.tau);
+      const double gscale = weight * wv * b1 / c.tau;
+      const double hscale = 2 * weight * wv * b2 / (c.tau * c.tau);
       for (int k = 0; k < 4; ++k) {
         if (grad) grad->segment<3>(3 * vs[k]) += gscale * sc[k] * u;
         if (hess && sc[k] != 0) hess->add_outer(&vs[k], 1, hscale * sc[k] * sc[k], u.data());
@@ -212,6 +213,46 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
   }
   if (infinite) return std::numeric_limits<double>::infinity();
   return weight * E;
+}
+
+void contact_ratios(const MatX3d& X, const ContactRest& rest, std::vector<double>& ratio) {
+  ratio.assign(X.rows(), std::numeric_limits<double>::infinity());
+  if (rest.vertices == 0) return;
+  const MatX3i& F = rest.F;
+  TriangleGrid grid(X, F, rest.dhat_max);
+  for (int v = 0; v < X.rows(); ++v) {
+    const double dh = rest.dhat[v];
+    if (!(dh > 0)) continue;
+    const Vec3 x = row(X, v), r3 = Vec3::Constant(dh);
+    grid.query(x - r3, x + r3, [&](int f) {
+      if (!rest.facing(v, f) || !near_box(X, F, f, x, dh)) return;
+      const double d = distance_to(X, F, f, x, nullptr);
+      if (d >= dh) return;
+      const double tau = rest.threshold(v, f);
+      if (tau > 0 && d < tau) ratio[v] = std::min(ratio[v], rest.keep * d / tau);
+    });
+  }
+}
+
+Flattened contact_flattened(const MatX3d& X, const ContactRest& rest, double spacing, int max_places) {
+  Flattened out;
+  std::vector<double> ratio;
+  contact_ratios(X, rest, ratio);
+  std::vector<std::pair<double, int>> pressed;  // (ratio, v)
+  for (int v = 0; v < X.rows(); ++v) {
+    if (!(ratio[v] < rest.keep)) continue;
+    out.fraction += rest.w[v];
+    pressed.emplace_back(ratio[v], v);
+  }
+  std::stable_sort(pressed.begin(), pressed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  if (!pressed.empty()) out.ratio = pressed.front().first;
+  for (const auto& [r, v] : pressed) {
+    if (static_cast<int>(out.places.size()) >= max_places) break;
+    bool apart = true;
+    for (int u : out.places) apart = apart && (rest.X.row(v) - rest.X.row(u)).norm() > spacing;
+    if (apart) out.places.push_back(v);
+  }
+  return out;
 }
 
 namespace {

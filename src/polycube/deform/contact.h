@@ -53,6 +53,17 @@ struct ContactRest {
 double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, Eigen::VectorXd* grad,
                       HessianSink* hess, int* active = nullptr);
 
+/// Thin parts pressed in X, measured as the contact barrier sees them (unlike flattened_parts,
+/// sliding does not fool it): the vertices with dhat > 0 closer to a triangle across than keep x
+/// min(their thickness, their rest distance to it). ratio: the smallest such distance over that
+/// reference (never negative: the barrier keeps the sides from crossing); places as in
+/// flattened_parts (apart by `spacing` at rest).
+/// Per vertex: the smallest distance to a triangle across within its contact distance, over
+/// min(its thickness, its rest distance to that triangle) (+inf where none is that close).
+void contact_ratios(const MatX3d& X, const ContactRest& rest, std::vector<double>& ratio);
+
+Flattened contact_flattened(const MatX3d& X, const ContactRest& rest, double spacing = 0.1, int max_places = 5);
+
 /// A step length t in (0, 1] along D from X such that no vertex with dhat > 0 passes through a
 /// triangle it has a contact threshold with: 0.8 x the first time in [0, 1] at which such a vertex
 /// lies in its triangle, moving linearly (the root of the cubic of their coplanarity, then the

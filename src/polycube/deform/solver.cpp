@@ -664,8 +664,10 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
     const MatX3d rest = (V.rowwise() - centre) / scale;
     const std::vector<ThicknessPair> built =
         p.thickness.empty() && watch.empty() ? thickness_pairs(rest, B, opt.thickness_max) : std::vector<ThicknessPair>{};
-    res.thin_flattened = flattened_parts(rest, X, B, !p.thickness.empty() ? p.thickness : !watch.empty() ? watch : built,
-                                         opt.thickness_keep);
+    res.thin_flattened =
+        p.contact ? contact_flattened(X, *p.contact)
+                  : flattened_parts(rest, X, B, !p.thickness.empty() ? p.thickness : !watch.empty() ? watch : built,
+                                    opt.thickness_keep);
   }
   res.factorizations = factorizations;
   res.float_factorizations = sys.float_factorizations();

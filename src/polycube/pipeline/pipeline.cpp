@@ -635,7 +635,8 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                        {"sqp_tolerance", opt.deform.sqp_tolerance_for(opt.surface)}};
       if (opt.surface && input_closed) {
         // Thin parts the surface deformation pressed flat (their gap across measured along the
-        // normal, deform::flattened_parts): the polycube flattens or loses them (cow's hind legs).
+        // normal, deform::flattened_parts; with the contact barrier, their distance across,
+        // deform::contact_flattened): the polycube flattens or loses them (cow's hind legs).
         const deform::Flattened& fl = dr.thin_flattened;
         json places = json::array();
         for (int v : fl.places) places.push_back({tm.V(v, 0), tm.V(v, 1), tm.V(v, 2)});
@@ -656,7 +657,10 @@ json run_pipeline(const PipelineOptions& opt, const Hooks& hooks) {
                                             " places apart, in the report's polycube.thin_flattened.places)"
                                       : std::string())
              << ": the polycube flattens or loses such parts (the volume pipeline, --quad without --surface, "
-                "deforms the inside too and usually keeps them)";
+                "deforms the inside too and usually keeps them"
+             << (opt.deform.thickness_contact
+                     ? ")"
+                     : "; --thickness-form contact holds the two sides apart also where they slide along each other)");
           hooks.warn(os.str());
         }
       }
