@@ -53,15 +53,14 @@ struct ContactRest {
 double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, Eigen::VectorXd* grad,
                       HessianSink* hess, int* active = nullptr);
 
-/// Thin parts pressed in X, measured as the contact barrier sees them (unlike flattened_parts,
-/// sliding does not fool it): the vertices with dhat > 0 closer to a triangle across than keep x
-/// min(their thickness, their rest distance to it). ratio: the smallest such distance over that
-/// reference (never negative: the barrier keeps the sides from crossing); places as in
-/// flattened_parts (apart by `spacing` at rest).
 /// Per vertex: the smallest distance to a triangle across within its contact distance, over
 /// min(its thickness, its rest distance to that triangle) (+inf where none is that close).
 void contact_ratios(const MatX3d& X, const ContactRest& rest, std::vector<double>& ratio);
 
+/// Thin parts pressed in X, measured as the contact barrier sees them (unlike flattened_parts,
+/// sliding does not fool it): the vertices with dhat > 0 whose contact_ratios are under keep.
+/// ratio: the smallest of those (never negative: the barrier keeps the sides from crossing);
+/// places as in flattened_parts (apart by `spacing` at rest).
 Flattened contact_flattened(const MatX3d& X, const ContactRest& rest, double spacing = 0.1, int max_places = 5);
 
 /// A step length t in (0, 1] along D from X such that no vertex with dhat > 0 passes through a
