@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "polycube/geometry/closest_point.h"
 
@@ -142,6 +143,27 @@ double ContactRest::threshold(int v, int f) const {
   return std::min(dhat[v], keep * d);
 }
 
+namespace {
+
+// Calls fn(f, d, tau, bary) for every triangle f that vertex v (dhat > 0) has a contact with in X:
+// across (ContactRest::facing) and closer than tau = threshold(v, f); d the distance, bary the
+// closest point's barycentric coordinates.
+template <class Fn>
+void near_contacts(const MatX3d& X, const ContactRest& rest, TriangleGrid& grid, int v, Fn&& fn) {
+  const double dh = rest.dhat[v];
+  const Vec3 x = row(X, v), r3 = Vec3::Constant(dh);
+  grid.query(x - r3, x + r3, [&](int f) {
+    if (!rest.facing(v, f) || !near_box(X, rest.F, f, x, dh)) return;
+    Vec3 bary;
+    const double d = distance_to(X, rest.F, f, x, &bary);
+    if (d >= dh) return;  // (the threshold is at most dh: the rest distance is cheaper to skip)
+    const double tau = rest.threshold(v, f);
+    if (tau > 0 && d < tau) fn(f, d, tau, bary);
+  });
+}
+
+}  // namespace
+
 double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, Eigen::VectorXd* grad,
                       HessianSink* hess, int* active) {
   if (active) *active = 0;
@@ -161,17 +183,11 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
   double E = 0;
   bool infinite = false;
   for (int v = 0; v < X.rows() && !infinite; ++v) {
-    const double dh = rest.dhat[v];
-    if (!(dh > 0)) continue;
-    const Vec3 x = row(X, v), r3 = Vec3::Constant(dh);
+    if (!(rest.dhat[v] > 0)) continue;
+    const Vec3 x = row(X, v);
     found.clear();
-    grid.query(x - r3, x + r3, [&](int f) {
-      if (infinite || !rest.facing(v, f) || !near_box(X, F, f, x, dh)) return;
-      Vec3 bary;
-      const double d = distance_to(X, F, f, x, &bary);
-      if (d >= dh) return;  // (the threshold is at most dh: the rest distance is cheaper to skip)
-      const double tau = rest.threshold(v, f);
-      if (!(tau > 0) || d >= tau) return;
+    near_contacts(X, rest, grid, v, [&](int f, double d, double tau, const Vec3& bary) {
+      if (infinite) return;
       if (!(d > 0)) {
         infinite = true;
         return;
@@ -191,7 +207,6 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
     });
     const double wv = rest.w[v];
     for (const Contact& c : found) {
-      if (c.d >= c.tau) continue;
       const double r = c.d / c.tau, lr = std::log(r);
       E += wv * -(r - 1) * (r - 1) * lr;
       if (active) ++*active;
@@ -218,41 +233,25 @@ double contact_energy(const MatX3d& X, const ContactRest& rest, double weight, E
 void contact_ratios(const MatX3d& X, const ContactRest& rest, std::vector<double>& ratio) {
   ratio.assign(X.rows(), std::numeric_limits<double>::infinity());
   if (rest.vertices == 0) return;
-  const MatX3i& F = rest.F;
-  TriangleGrid grid(X, F, rest.dhat_max);
-  for (int v = 0; v < X.rows(); ++v) {
-    const double dh = rest.dhat[v];
-    if (!(dh > 0)) continue;
-    const Vec3 x = row(X, v), r3 = Vec3::Constant(dh);
-    grid.query(x - r3, x + r3, [&](int f) {
-      if (!rest.facing(v, f) || !near_box(X, F, f, x, dh)) return;
-      const double d = distance_to(X, F, f, x, nullptr);
-      if (d >= dh) return;
-      const double tau = rest.threshold(v, f);
-      if (tau > 0 && d < tau) ratio[v] = std::min(ratio[v], rest.keep * d / tau);
-    });
-  }
+  TriangleGrid grid(X, rest.F, rest.dhat_max);
+  for (int v = 0; v < X.rows(); ++v)
+    if (rest.dhat[v] > 0)
+      near_contacts(X, rest, grid, v, [&](int, double d, double tau, const Vec3&) {
+        ratio[v] = std::min(ratio[v], rest.keep * d / tau);
+      });
 }
 
 Flattened contact_flattened(const MatX3d& X, const ContactRest& rest, double spacing, int max_places) {
-  Flattened out;
   std::vector<double> ratio;
   contact_ratios(X, rest, ratio);
   std::vector<std::pair<double, int>> pressed;  // (ratio, v)
-  for (int v = 0; v < X.rows(); ++v) {
-    if (!(ratio[v] < rest.keep)) continue;
-    out.fraction += rest.w[v];
-    pressed.emplace_back(ratio[v], v);
-  }
-  std::stable_sort(pressed.begin(), pressed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  if (!pressed.empty()) out.ratio = pressed.front().first;
-  for (const auto& [r, v] : pressed) {
-    if (static_cast<int>(out.places.size()) >= max_places) break;
-    bool apart = true;
-    for (int u : out.places) apart = apart && (rest.X.row(v) - rest.X.row(u)).norm() > spacing;
-    if (apart) out.places.push_back(v);
-  }
-  return out;
+  double fraction = 0;
+  for (int v = 0; v < X.rows(); ++v)
+    if (ratio[v] < rest.keep) {
+      fraction += rest.w[v];
+      pressed.emplace_back(ratio[v], v);
+    }
+  return pressed_places(rest.X, std::move(pressed), fraction, spacing, max_places);
 }
 
 namespace {
@@ -324,8 +323,7 @@ double first_hit(const Vec3& x, const Vec3& dx, const Vec3 (&q)[3], const Vec3 (
 
 double contact_step_bound(const MatX3d& X, const MatX3d& D, const ContactRest& rest) {
   if (rest.vertices == 0) return 1.0;
-  const Eigen::VectorXd move = D.rowwise().norm();
-  const double max_move = move.maxCoeff();
+  const double max_move = D.rowwise().norm().maxCoeff();
   if (!(max_move > 0)) return 1.0;
   const MatX3i& F = rest.F;
   // Pairs farther apart than 2 max_move cannot meet within a full step.

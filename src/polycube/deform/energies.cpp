@@ -604,18 +604,10 @@ double pair_gap(const MatX3d& X, const MatX3i& F, const ThicknessPair& p) {
   return (p.exterior ? 1.0 : -1.0) * across(X, F, p).dot(N) / A;
 }
 
-Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
-                          double keep, double spacing, int max_places) {
+Flattened pressed_places(const MatX3d& R, std::vector<std::pair<double, int>> pressed, double fraction,
+                         double spacing, int max_places) {
   Flattened out;
-  std::vector<std::pair<double, int>> pressed;  // (ratio, v), for the places
-  for (const ThicknessPair& p : pairs) {
-    const double rest = pair_gap(R, F, p);
-    if (!(rest >= 0.5 * across(R, F, p).norm()) || !(rest > 0)) continue;
-    const double ratio = pair_gap(X, F, p) / rest;
-    if (!(ratio < keep)) continue;
-    out.fraction += p.w;
-    pressed.emplace_back(ratio, p.v);
-  }
+  out.fraction = fraction;
   std::stable_sort(pressed.begin(), pressed.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
   if (!pressed.empty()) out.ratio = pressed.front().first;
   for (const auto& [ratio, v] : pressed) {
@@ -625,6 +617,21 @@ Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, con
     if (apart) out.places.push_back(v);
   }
   return out;
+}
+
+Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
+                          double keep, double spacing, int max_places) {
+  std::vector<std::pair<double, int>> pressed;  // (ratio, v), for the places
+  double fraction = 0;
+  for (const ThicknessPair& p : pairs) {
+    const double rest = pair_gap(R, F, p);
+    if (!(rest >= 0.5 * across(R, F, p).norm()) || !(rest > 0)) continue;
+    const double ratio = pair_gap(X, F, p) / rest;
+    if (!(ratio < keep)) continue;
+    fraction += p.w;
+    pressed.emplace_back(ratio, p.v);
+  }
+  return pressed_places(R, std::move(pressed), fraction, spacing, max_places);
 }
 
 double thickness_energy(const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs, double keep,

@@ -7,6 +7,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <utility>
 #include <vector>
 
 #include "polycube/core/error.h"
@@ -190,6 +191,11 @@ struct Flattened {
 };
 Flattened flattened_parts(const MatX3d& R, const MatX3d& X, const MatX3i& F, const std::vector<ThicknessPair>& pairs,
                           double keep, double spacing = 0.1, int max_places = 5);
+/// The Flattened of the pressed vertices given as (ratio, vertex) with their area fraction: the
+/// smallest ratio, and the places, worst first, each farther than `spacing` in R (rest) from those
+/// already listed, at most max_places (flattened_parts and contact_flattened share it).
+Flattened pressed_places(const MatX3d& R, std::vector<std::pair<double, int>> pressed, double fraction,
+                         double spacing, int max_places);
 
 /// sum_p w_p phi(d_p / (keep d0_p)), d_p = |x_v - sum_i bary_i x_fi|, with
 /// phi(r) = r - 1 - log r for r < 1 and 0 above: zero while the part keeps at least `keep` of its

@@ -662,8 +662,9 @@ DeformResult deform(const MatX3d& V, const MatX4i& T, const MatX3i& B, const Def
   if (!p.thickness.empty()) res.thin_crushed_after = crushed_fraction(X, B, p.thickness, opt.thickness_keep);
   if (p.surface && p.border.empty()) {
     const MatX3d rest = (V.rowwise() - centre) / scale;
-    const std::vector<ThicknessPair> built =
-        p.thickness.empty() && watch.empty() ? thickness_pairs(rest, B, opt.thickness_max) : std::vector<ThicknessPair>{};
+    const std::vector<ThicknessPair> built = !p.contact && p.thickness.empty() && watch.empty()
+                                                 ? thickness_pairs(rest, B, opt.thickness_max)
+                                                 : std::vector<ThicknessPair>{};
     res.thin_flattened =
         p.contact ? contact_flattened(X, *p.contact)
                   : flattened_parts(rest, X, B, !p.thickness.empty() ? p.thickness : !watch.empty() ? watch : built,
